@@ -1,0 +1,45 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'threat_planner'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'bench']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/scenarios', glob('test/data/*.yaml')),
+    ],
+    install_requires=['setuptools', 'numpy', 'scipy', 'networkx', 'PyYAML', 'matplotlib', 'tqdm'],
+    extras_require={
+        'ros': [
+            'ros-jazzy-rclpy[fastrtps]',
+            'ros-jazzy-geometry-msgs',
+            'ros-jazzy-nav-msgs',
+            'ros-jazzy-sensor-msgs',
+            'ros-jazzy-visualization-msgs',
+            'ros-jazzy-std-msgs',
+            'ros-jazzy-diagnostic-msgs',
+        ],
+        'record': ['mcap', 'mcap-ros2-support'],
+        'test': ['pytest', 'hypothesis', 'flake8', 'pydocstyle', 'rosbags'],
+    },
+    zip_safe=True,
+    maintainer='threat_planner maintainers',
+    maintainer_email='maintainers@users.noreply.h-seed-a7c681e7.example',
+    description='Threat-aware 3-D UAV path planner (Delaunay incentre network, Dijkstra, '
+                'potential-field smoothing, direct cost optimisation).',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'threat-planner = threat_planner.cli:main',
+            'planner_node = threat_planner.planner_node:main',
+            'threat_publisher = threat_planner.threat_publisher:main',
+        ],
+    },
+)
