@@ -1,0 +1,344 @@
+"""Trajectory cost J = w*J_R + (1-w)*J_L (paper Section IV, eq. 15-17), in closed form.
+
+Convention (the project's, documented in the README):
+
+* J_L is the polyline's length (eq. 16).
+* J_R is the sum over segments and threats of ``F_i * integral ds / |x(s) - p_i|^4`` along
+  the segment, ``s`` being arc length. The paper's eq. 17 omits the intensity F_i and
+  multiplies the integral by the segment length L a second time; we weight by F_i (the
+  radar equation, eq. 3) and integrate over arc length once, so J_R is independent of how a
+  straight flight is split into segments.
+
+For a segment with unit direction u, the threat's foot point on the segment's line splits
+the segment at signed abscissae t1 < t2 (t2 - t1 = L) and lies at distance h from the
+threat, so the integrand is 1/(t^2 + h^2)^2. Its antiderivative has an atan part of size
+1/h^3 that cancels between the two ends when both lie on the same side of the foot point;
+near-line threats (h -> 0) would lose every digit to that cancellation, so each end's
+antiderivative is split into an exact multiple of pi/(4 h^3), cancelled symbolically, and a
+remainder evaluated by a series where it is small. The same split gives the 1/(t^2+h^2)^3
+moment used by the analytic gradient.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+#: Threats whose closest approach to a segment is below this are treated as hit [m].
+CONTACT_DISTANCE = 1e-9
+
+# Below this ratio h/|t| the remainders use their power series (see _far_remainders).
+_SERIES_LIMIT = 0.25
+_N_TERMS = 14
+_n = np.arange(1, _N_TERMS + 1)
+# (atan x - x/(1+x^2)) / x^3 = sum_{n>=1} (-1)^(n+1) 2n/(2n+1) x^(2n-2)
+_C2 = ((-1.0) ** (_n + 1)) * 2 * _n / (2 * _n + 1)
+_m = np.arange(2, _N_TERMS + 2)
+# (3/8 atan x - 3/8 x/(1+x^2) - 1/4 x^3/(1+x^2)^2) / x^5
+#   = sum_{n>=2} (-1)^n n(n-1) / (2(2n+1)) x^(2n-4)
+_C3 = ((-1.0) ** _m) * _m * (_m - 1) / (2 * (2 * _m + 1))
+
+
+@dataclass(frozen=True)
+class Cost:
+    """The three numbers that score a path.
+
+    Attributes:
+        J: Weighted total w*J_R + (1-w)*J_L.
+        J_L: Length cost [m].
+        J_R: Threat cost [intensity * m^-3].
+    """
+
+    J: float
+    J_L: float
+    J_R: float
+
+    def as_dict(self) -> dict[str, float]:
+        """Return ``{"J": ..., "J_L": ..., "J_R": ...}``."""
+        return {'J': self.J, 'J_L': self.J_L, 'J_R': self.J_R}
+
+
+def _series(x2: NDArray, coeffs: NDArray) -> NDArray:
+    """Evaluate sum_k coeffs[k] * x2**k by Horner's rule."""
+    out = np.full_like(x2, coeffs[-1])
+    for c in coeffs[-2::-1]:
+        out = out * x2 + c
+    return out
+
+
+def _antiderivatives(t: NDArray, h: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """Split antiderivatives of 1/(t^2+h^2)^2 and 1/(t^2+h^2)^3 at abscissa t.
+
+    Returns ``(c, r2, r3)`` such that the antiderivatives are ``c*pi/(4 h^3) + r2`` and
+    ``c*3pi/(16 h^5) + r3``, where c = sign(t) for |t| > h and 0 otherwise. Differences of c
+    are then exact integers, so the large terms cancel without rounding.
+    """
+    abs_t = np.abs(t)
+    far = abs_t > h
+    c = np.where(far, np.sign(t), 0.0)
+    r2 = np.empty_like(t)
+    r3 = np.empty_like(t)
+
+    # Near the foot point, the plain antiderivative in r = t/h is well conditioned.
+    near = ~far
+    if np.any(near):
+        hn = h[near]
+        r = t[near] / hn
+        q = 1.0 / (1.0 + r * r)
+        at = np.arctan(r)
+        r2[near] = (at + r * q) / (2.0 * hn ** 3)
+        r3[near] = (0.375 * at + 0.375 * r * q + 0.25 * r * q * q) / hn ** 5
+
+    # Far from it, write atan(t/h) = sign(t) pi/2 - atan(h/t) and keep only the remainder,
+    # which behaves like -1/(3 t^3) and -1/(5 t^5).
+    if np.any(far):
+        tf = abs_t[far]
+        x = h[far] / tf
+        x2 = x * x
+        small = x < _SERIES_LIMIT
+        g2 = np.empty_like(x)
+        g3 = np.empty_like(x)
+        g2[small] = _series(x2[small], _C2)
+        g3[small] = _series(x2[small], _C3)
+        big = ~small
+        if np.any(big):
+            xb = x[big]
+            qb = 1.0 / (1.0 + xb * xb)
+            at = np.arctan(xb)
+            g2[big] = (at - xb * qb) / xb ** 3
+            g3[big] = (0.375 * at - 0.375 * xb * qb - 0.25 * xb ** 3 * qb * qb) / xb ** 5
+        s = np.sign(t[far])
+        r2[far] = -s * g2 / (2.0 * tf ** 3)
+        r3[far] = -s * g3 / tf ** 5
+    return c, r2, r3
+
+
+@dataclass(frozen=True)
+class _Geometry:
+    """Geometry of (segment, threat) pairs, broadcast to a common shape ``P``."""
+
+    length: NDArray      # P, segment lengths
+    u: NDArray           # P x 3, unit directions
+    t1: NDArray          # P, abscissa of the segment start from the foot point
+    t2: NDArray          # P
+    h: NDArray           # P, distance from the threat to the segment's line
+    perp: NDArray        # P x 3, foot point minus threat
+
+
+def _geometry(a: NDArray, b: NDArray, p: NDArray) -> _Geometry:
+    """Pair geometry; a, b and p broadcast against each other (last axis xyz)."""
+    d = b - a
+    length = np.linalg.norm(d, axis=-1)
+    u = d / np.where(length > 0, length, 1.0)[..., None]
+    e = a - p
+    t1 = np.sum(e * u, axis=-1)
+    perp = e - t1[..., None] * u
+    h = np.linalg.norm(perp, axis=-1)
+    shape = h.shape
+    length = np.broadcast_to(length, shape)
+    return _Geometry(length, np.broadcast_to(u, shape + (3,)), t1, t1 + length, h, perp)
+
+
+def segment_integrals(a: NDArray, b: NDArray, positions: NDArray) -> NDArray:
+    """Closed-form integral of ds / |x(s) - p|^4 over each segment for each threat.
+
+    Args:
+        a: Segment starts, shape (S, 3) [m].
+        b: Segment ends, shape (S, 3) [m].
+        positions: Threat positions, shape (N, 3) [m].
+
+    Returns:
+        Array (S, N) of integrals [m^-3] (not yet weighted by intensity); ``inf`` where a
+        segment passes within CONTACT_DISTANCE of a threat, 0 for zero-length segments.
+    """
+    a = np.asarray(a, float)[:, None, :]
+    b = np.asarray(b, float)[:, None, :]
+    return _integrals(_geometry(a, b, np.asarray(positions, float)[None, :, :]))[0]
+
+
+def pair_integrals(a: NDArray, b: NDArray, p: NDArray) -> NDArray:
+    """Closed-form integral of ds / |x(s) - p|^4 for matched (segment, threat) pairs.
+
+    Args:
+        a: Segment starts, shape (P, 3) [m].
+        b: Segment ends, shape (P, 3) [m].
+        p: Threat positions, shape (P, 3) [m].
+
+    Returns:
+        Array (P,) of integrals [m^-3].
+    """
+    return _integrals(_geometry(np.asarray(a, float), np.asarray(b, float),
+                                np.asarray(p, float)))[0]
+
+
+def _integrals(g: _Geometry) -> tuple[NDArray, NDArray]:
+    """Return the integrals of 1/d^4 and of 1/d^6 along each pair's segment."""
+    h = g.h
+    c1, r2a, r3a = _antiderivatives(g.t1, h)
+    c2, r2b, r3b = _antiderivatives(g.t2, h)
+    dc = c2 - c1
+    with np.errstate(divide='ignore', invalid='ignore'):
+        big2 = np.where(dc != 0, dc * (np.pi / 4.0) / h ** 3, 0.0)
+        big3 = np.where(dc != 0, dc * (3.0 * np.pi / 16.0) / h ** 5, 0.0)
+        i2 = big2 + (r2b - r2a)
+        i3 = big3 + (r3b - r3a)
+    # A threat on the segment itself (h ~ 0 with the foot point inside) costs infinity.
+    hit = (h < CONTACT_DISTANCE) & (g.t1 <= CONTACT_DISTANCE) & (g.t2 >= -CONTACT_DISTANCE)
+    zero = g.length == 0
+    i2 = np.where(zero, 0.0, np.where(hit, np.inf, i2))
+    i3 = np.where(zero, 0.0, np.where(hit, np.inf, i3))
+    return i2, i3
+
+
+def segment_threat_costs(a: NDArray, b: NDArray, positions: NDArray,
+                         intensities: NDArray, chunk: int = 2_000_000) -> NDArray:
+    """Threat cost of each segment, sum_i F_i * integral ds/d^4 (eq. 17, our convention).
+
+    Args:
+        a: Segment starts, shape (S, 3) [m].
+        b: Segment ends, shape (S, 3) [m].
+        positions: Threat positions, shape (N, 3) [m].
+        intensities: Threat intensities F, shape (N,).
+        chunk: Largest number of (segment, threat) pairs evaluated at once, to bound memory.
+
+    Returns:
+        Array (S,) of threat costs.
+    """
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    positions = np.asarray(positions, float)
+    intensities = np.asarray(intensities, float)
+    n = len(positions)
+    out = np.zeros(len(a))
+    if n == 0 or len(a) == 0:
+        return out
+    step = max(1, chunk // n)
+    for s in range(0, len(a), step):
+        out[s:s + step] = segment_integrals(a[s:s + step], b[s:s + step], positions) @ intensities
+    return out
+
+
+def path_cost(points: NDArray, positions: NDArray, intensities: NDArray, w: float) -> Cost:
+    """Cost J of a polyline (eq. 15), with J_L (eq. 16) and closed-form J_R (eq. 17).
+
+    Args:
+        points: Polyline vertices, shape (n, 3) [m].
+        positions: Threat positions, shape (N, 3) [m].
+        intensities: Threat intensities F, shape (N,).
+        w: Threat weight, 0 < w < 1.
+
+    Returns:
+        The path's Cost.
+    """
+    points = np.asarray(points, float)
+    j_l = float(np.sum(np.linalg.norm(np.diff(points, axis=0), axis=1)))
+    j_r = float(np.sum(segment_threat_costs(points[:-1], points[1:], positions, intensities)))
+    return Cost(w * j_r + (1.0 - w) * j_l, j_l, j_r)
+
+
+def _pair_gradient(g: _Geometry, f: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """Weighted integrals F*I of each pair and their gradients at the segment's two ends.
+
+    With D the foot point minus the threat, phi_k = 1/|end_k - p|^4 and M0 the integral of
+    1/d^6, the segment integral I(t1, t2, h^2) has dI/dt2 = phi_b, dI/dt1 = -phi_a and
+    dI/d(h^2) = -2 M0; with dt1/da = u - D/L, dt2/da = -D/L, d(h^2)/da = 2D(1 + t1/L) and
+    their counterparts at b this gives the exact gradient.
+    """
+    i2, i3 = _integrals(g)
+    ok = g.length > 0
+    inv_l = np.where(ok, 1.0 / np.where(ok, g.length, 1.0), 0.0)
+    with np.errstate(divide='ignore'):
+        phi_a = np.where(ok, f / (g.t1 ** 2 + g.h ** 2) ** 2, 0.0)
+        phi_b = np.where(ok, f / (g.t2 ** 2 + g.h ** 2) ** 2, 0.0)
+    m0 = i3 * f
+    coef_d_a = (phi_a - phi_b) * inv_l - 4.0 * m0 * (1.0 + g.t1 * inv_l)
+    coef_d_b = (phi_b - phi_a) * inv_l + 4.0 * m0 * g.t1 * inv_l
+    da = coef_d_a[..., None] * g.perp - phi_a[..., None] * g.u
+    db = coef_d_b[..., None] * g.perp + phi_b[..., None] * g.u
+    return i2 * f, da, db
+
+
+def threat_cost_and_gradient(points: NDArray, positions: NDArray, intensities: NDArray,
+                             pairs: tuple[NDArray, NDArray] | None = None
+                             ) -> tuple[float, NDArray]:
+    """J_R of a polyline and its exact gradient with respect to every vertex.
+
+    Args:
+        points: Polyline vertices, shape (n, 3) [m].
+        positions: Threat positions, shape (N, 3) [m].
+        intensities: Threat intensities F, shape (N,).
+        pairs: Optional ``(segment_index, threat_index)`` arrays restricting the sum to
+            those pairs (a cut-off, see ``ThreatField.near_pairs``); all pairs if None.
+
+    Returns:
+        ``(J_R, grad)`` with grad of shape (n, 3).
+    """
+    points = np.asarray(points, float)
+    positions = np.asarray(positions, float)
+    f = np.asarray(intensities, float)
+    a, b = points[:-1], points[1:]
+    grad = np.zeros_like(points)
+    if len(positions) == 0:
+        return 0.0, grad
+    if pairs is None:
+        cost, da, db = _pair_gradient(
+            _geometry(a[:, None, :], b[:, None, :], positions[None, :, :]), f[None, :])
+        j_r = float(cost.sum())
+        da, db = da.sum(axis=1), db.sum(axis=1)
+    else:
+        seg, thr = pairs
+        cost, da_p, db_p = _pair_gradient(_geometry(a[seg], b[seg], positions[thr]), f[thr])
+        j_r = float(cost.sum())
+        da = np.stack([np.bincount(seg, da_p[:, k], len(a)) for k in range(3)], axis=1)
+        db = np.stack([np.bincount(seg, db_p[:, k], len(a)) for k in range(3)], axis=1)
+    if not np.isfinite(j_r):
+        return j_r, grad
+    grad[:-1] += da
+    grad[1:] += db
+    return j_r, grad
+
+
+def cost_and_gradient(points: NDArray, positions: NDArray, intensities: NDArray, w: float,
+                      pairs: tuple[NDArray, NDArray] | None = None) -> tuple[float, NDArray]:
+    """J of a polyline (eq. 15) and its gradient with respect to every vertex.
+
+    Args:
+        points: Polyline vertices, shape (n, 3) [m].
+        positions: Threat positions, shape (N, 3) [m].
+        intensities: Threat intensities F, shape (N,).
+        w: Threat weight, 0 < w < 1.
+        pairs: Optional cut-off pairs, as in threat_cost_and_gradient.
+
+    Returns:
+        ``(J, grad)`` with grad of shape (n, 3).
+    """
+    points = np.asarray(points, float)
+    j_r, g_r = threat_cost_and_gradient(points, positions, intensities, pairs)
+    d = np.diff(points, axis=0)
+    seg = np.linalg.norm(d, axis=1)
+    unit = d / np.where(seg > 0, seg, 1.0)[:, None]
+    g_l = np.zeros_like(points)
+    g_l[:-1] -= unit
+    g_l[1:] += unit
+    return w * j_r + (1.0 - w) * float(seg.sum()), w * g_r + (1.0 - w) * g_l
+
+
+def pair_threat_costs(a: NDArray, b: NDArray, positions: NDArray, intensities: NDArray,
+                      seg: NDArray, thr: NDArray) -> NDArray:
+    """Threat cost of each segment summed over the given (segment, threat) pairs only.
+
+    Args:
+        a: Segment starts, shape (S, 3) [m].
+        b: Segment ends, shape (S, 3) [m].
+        positions: Threat positions, shape (N, 3) [m].
+        intensities: Threat intensities F, shape (N,).
+        seg: Segment index of each pair, shape (P,).
+        thr: Threat index of each pair, shape (P,).
+
+    Returns:
+        Array (S,) of threat costs over the pairs given.
+    """
+    vals = pair_integrals(a[seg], b[seg], positions[thr]) * intensities[thr]
+    return np.bincount(seg, vals, len(a))

@@ -1,0 +1,133 @@
+"""Scenario files: the flight box, start, goal and threats, in YAML.
+
+Layout (as in the bundled ``test/data/*.yaml``)::
+
+    name: uniform20_0
+    frame_id: map
+    description: optional text
+    bounds: {min: [x, y, z], max: [x, y, z]}
+    start: [x, y, z]
+    goal: [x, y, z]
+    threats:
+      - {position: [x, y, z], intensity: F}
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from threat_planner.errors import InputError, ScenarioError
+from threat_planner.planner import check_endpoints
+from threat_planner.threats import Box, ThreatField
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A planning problem.
+
+    Attributes:
+        name: Scenario name.
+        frame_id: Frame of every coordinate.
+        description: Free text.
+        box: Flight box.
+        start: Start point (3,) [m].
+        goal: Goal point (3,) [m].
+        threats: The threat field.
+    """
+
+    name: str
+    frame_id: str
+    description: str
+    box: Box
+    start: np.ndarray
+    goal: np.ndarray
+    threats: ThreatField
+
+    def to_dict(self) -> dict:
+        """The scenario in the YAML file layout."""
+        return {
+            'name': self.name, 'frame_id': self.frame_id, 'description': self.description,
+            'bounds': {'min': self.box.lo.tolist(), 'max': self.box.hi.tolist()},
+            'start': self.start.tolist(), 'goal': self.goal.tolist(),
+            'threats': [{'position': p.tolist(), 'intensity': float(f)}
+                        for p, f in zip(self.threats.positions, self.threats.intensities)],
+        }
+
+
+def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
+    """Build and validate a Scenario from parsed YAML.
+
+    Args:
+        data: The parsed document.
+        source: Where it came from, for error messages.
+
+    Returns:
+        The Scenario.
+
+    Raises:
+        ScenarioError: one line naming the source and the bad field.
+    """
+    def fail(msg: str) -> ScenarioError:
+        return ScenarioError(f'{source}: {msg}')
+
+    if not isinstance(data, dict):
+        raise fail('expected a mapping at the top level')
+    for key in ('bounds', 'start', 'goal', 'threats'):
+        if key not in data:
+            raise fail(f'missing field "{key}"')
+    bounds = data['bounds']
+    if not isinstance(bounds, dict) or 'min' not in bounds or 'max' not in bounds:
+        raise fail('field "bounds" needs "min" and "max"')
+    threats = data['threats'] if data['threats'] is not None else []
+    if not isinstance(threats, list):
+        raise fail('field "threats" must be a list')
+    positions, intensities = [], []
+    for i, t in enumerate(threats):
+        if not isinstance(t, dict) or 'position' not in t or 'intensity' not in t:
+            raise fail(f'threats[{i}] needs "position" and "intensity"')
+        positions.append(t['position'])
+        intensities.append(t['intensity'])
+    try:
+        for i, p in enumerate(positions):
+            if not isinstance(p, (list, tuple)) or len(p) != 3:
+                raise InputError(f'threats[{i}].position: expected [x, y, z], got {p!r}')
+        box = Box.from_corners(bounds['min'], bounds['max'])
+        field = ThreatField.from_arrays(np.array(positions, dtype=float).reshape(-1, 3),
+                                        np.array(intensities, dtype=float))
+        start, goal = check_endpoints(data['start'], data['goal'], box, field)
+    except InputError as exc:
+        raise fail(str(exc)) from None
+    except (TypeError, ValueError) as exc:
+        raise fail(f'bad value ({exc})') from None
+    return Scenario(str(data.get('name', Path(source).stem)), str(data.get('frame_id', 'map')),
+                    str(data.get('description', '') or ''), box, start, goal, field)
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file.
+
+    Args:
+        path: File path.
+
+    Returns:
+        The Scenario.
+
+    Raises:
+        ScenarioError: one line naming the file and the bad field.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ScenarioError(f'{path}: cannot read ({exc.strerror})') from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f' at line {mark.line + 1}' if mark else ''
+        raise ScenarioError(f'{path}: not valid YAML{where}') from None
+    return scenario_from_dict(data, str(path))

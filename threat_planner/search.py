@@ -1,0 +1,174 @@
+"""Search on the network (paper Section 3.3 and Section IV Cases 1-2): Dijkstra.
+
+The paper's "former" algorithm weighs each edge by its length; the "improved" one by the
+edge's own cost J (eq. 15), which the closed-form threat integral makes cheap. Start and goal
+are not network nodes: the paper joins them to the nearest node; Case 1 compares several
+entry and exit candidates, which we do either pair by pair or, in one search, by adding the
+start and goal as extra vertices joined to every candidate by their straight-line cost.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from threat_planner.cost import pair_threat_costs, segment_threat_costs
+from threat_planner.errors import PlanningError
+from threat_planner.partition import Network
+from threat_planner.threats import ThreatField
+
+#: Exact (segment x threat) pairs evaluated before edge costs switch to the cut-off.
+DENSE_PAIR_LIMIT = 4_000_000
+#: Cut-off radius for edge threat costs, in multiples of the threats' typical spacing.
+CUTOFF_SPACINGS = 3.0
+
+
+@dataclass(frozen=True)
+class EdgeCosts:
+    """Threat cost J_R of every network edge, and how far a cut-off may have lowered it.
+
+    Attributes:
+        threat: J_R of each edge, (E,).
+        bound: Largest J_R the cut-off may have left out of each edge, (E,); zeros if
+            every threat was counted.
+        radius: Cut-off radius used [m], or None when exact.
+    """
+
+    threat: NDArray
+    bound: NDArray
+    radius: float | None
+
+
+def segment_costs(a: NDArray, b: NDArray, threats: ThreatField,
+                  radius: float | None = None) -> tuple[NDArray, NDArray]:
+    """J_R of each segment, exact or cut off at ``radius``, with the cut-off's bound.
+
+    Args:
+        a: Segment starts, (S, 3) [m].
+        b: Segment ends, (S, 3) [m].
+        threats: The threat field.
+        radius: Cut-off distance [m]; None counts every threat.
+
+    Returns:
+        ``(costs (S,), bound (S,))``.
+    """
+    if radius is None or len(threats) == 0:
+        return (segment_threat_costs(a, b, threats.positions, threats.intensities),
+                np.zeros(len(a)))
+    seg, thr, bound = threats.near_pairs(a, b, radius)
+    return pair_threat_costs(a, b, threats.positions, threats.intensities, seg, thr), bound
+
+
+def edge_threat_costs(network: Network, threats: ThreatField, box_spacing: float,
+                      exact: bool | None = None) -> EdgeCosts:
+    """Threat cost of every network edge (closed form, eq. 17).
+
+    Args:
+        network: The incentre network.
+        threats: The threat field.
+        box_spacing: Typical threat spacing [m], which scales the cut-off radius.
+        exact: Count every threat (True), cut off (False), or decide by problem size (None).
+
+    Returns:
+        The EdgeCosts.
+    """
+    a = network.nodes[network.edges[:, 0]]
+    b = network.nodes[network.edges[:, 1]]
+    if exact is None:
+        exact = len(a) * len(threats) <= DENSE_PAIR_LIMIT
+    radius = None if exact else CUTOFF_SPACINGS * box_spacing
+    costs, bound = segment_costs(a, b, threats, radius)
+    return EdgeCosts(costs, bound, radius)
+
+
+def nearest_nodes(network: Network, point: NDArray, k: int) -> NDArray:
+    """The k nodes nearest to a point (entry or exit candidates), nearest first.
+
+    Args:
+        network: The network.
+        point: Query point (3,) [m].
+        k: How many candidates.
+
+    Returns:
+        Node indices, (min(k, M),).
+    """
+    k = max(1, min(k, network.n_nodes))
+    _, idx = network.node_tree.query(point, k=k)
+    return np.atleast_1d(idx).astype(np.int64)
+
+
+def _graph(n: int, edges: NDArray, weights: NDArray) -> csr_matrix:
+    # csgraph drops explicit zeros as "no edge", so coincident nodes get a tiny positive cost.
+    wt = np.maximum(weights, 1e-12)
+    rows = np.concatenate([edges[:, 0], edges[:, 1]])
+    cols = np.concatenate([edges[:, 1], edges[:, 0]])
+    return csr_matrix((np.concatenate([wt, wt]), (rows, cols)), shape=(n, n))
+
+
+def _walk_back(pred: NDArray, source: int, target: int) -> list[int]:
+    seq = [target]
+    while seq[-1] != source:
+        prev = int(pred[seq[-1]])
+        if prev < 0:
+            raise PlanningError(f'network: node {target} is not reachable from node {source}')
+        seq.append(prev)
+    return seq[::-1]
+
+
+def dijkstra_pairs(network: Network, weights: NDArray, entries: NDArray,
+                   exits: NDArray) -> dict[tuple[int, int], tuple[list[int], float]]:
+    """Least-weight node sequence for every (entry, exit) pair (paper Section 3.3).
+
+    Args:
+        network: The network.
+        weights: Edge weights, (E,) (length for the paper's algorithm, J for the improved).
+        entries: Entry candidate nodes.
+        exits: Exit candidate nodes.
+
+    Returns:
+        ``{(entry, exit): (node sequence, total weight)}`` for the reachable pairs.
+    """
+    g = _graph(network.n_nodes, network.edges, weights)
+    dist, pred = dijkstra(g, directed=False, indices=entries, return_predecessors=True)
+    out = {}
+    for r, s in enumerate(entries):
+        for t in exits:
+            if np.isfinite(dist[r, t]):
+                out[(int(s), int(t))] = (_walk_back(pred[r], int(s), int(t)), float(dist[r, t]))
+    return out
+
+
+def dijkstra_with_terminals(network: Network, weights: NDArray, start_costs: NDArray,
+                            entries: NDArray, goal_costs: NDArray, exits: NDArray
+                            ) -> tuple[list[int], float]:
+    """One Dijkstra over the network plus start and goal joined to their candidates.
+
+    Args:
+        network: The network.
+        weights: Edge weights, (E,).
+        start_costs: Weight of the straight leg from the start to each entry, (K,).
+        entries: Entry candidate nodes, (K,).
+        goal_costs: Weight of the straight leg from each exit to the goal, (K',).
+        exits: Exit candidate nodes, (K',).
+
+    Returns:
+        ``(node sequence without start and goal, total weight)``.
+
+    Raises:
+        PlanningError: if no exit is reachable from any entry.
+    """
+    m = network.n_nodes
+    s, t = m, m + 1
+    edges = np.concatenate([network.edges,
+                            np.stack([np.full(len(entries), s), entries], axis=1),
+                            np.stack([exits, np.full(len(exits), t)], axis=1)])
+    g = _graph(m + 2, edges, np.concatenate([weights, start_costs, goal_costs]))
+    dist, pred = dijkstra(g, directed=False, indices=s, return_predecessors=True)
+    if not np.isfinite(dist[t]):
+        raise PlanningError('network: the goal is not reachable from the start')
+    seq = _walk_back(pred, s, t)
+    return seq[1:-1], float(dist[t])
