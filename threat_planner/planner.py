@@ -25,15 +25,17 @@ from threat_planner.cost import Cost, path_cost
 from threat_planner.errors import InputError
 from threat_planner.optimisation import minimise_cost
 from threat_planner.partition import build_network, Network
-from threat_planner.search import (dijkstra_pairs, dijkstra_with_terminals,
-                                   edge_threat_costs, EdgeCosts, nearest_nodes,
-                                   segment_costs)
+from threat_planner.search import (alternative_routes, dijkstra_pairs, edge_threat_costs,
+                                   EdgeCosts, nearest_nodes, segment_costs)
 from threat_planner.smoothing import AngleCheck, check_angles, resample, smooth
 from threat_planner.threats import as_point, Box, ThreatField
 
 METHODS = ('paper', 'improved', 'best')
 #: Case 3's k sweep, from the paper: 500 <= k <= 3000 in steps of 100.
 K_SWEEP = tuple(range(500, 3001, 100))
+#: Segments and stopping tolerance of the coarse screening minimisation ('best').
+COARSE_SEGMENTS = 8
+COARSE_TOLERANCE = 1e-4
 
 
 @dataclass(frozen=True)
@@ -52,8 +54,11 @@ class PlannerConfig:
         max_pitch_deg: Pitch limit [deg].
         max_turn_deg: Turn (steering) limit between consecutive segments [deg].
         entry_candidates: K nearest nodes tried as entry and as exit (Case 1).
+        routes: Distinct network routes screened by 'best' (plus the straight line).
         box_divisions: Intervals per box edge of the auxiliary surface lattice.
         optimise: Run the direct J minimisation ('best' only).
+        confine_to_box: Keep the optimised path inside the flight box; False lets the
+            direct minimisation leave it (the reference yardstick's setting).
         max_smoothing_steps: Step limit of the chain integration.
     """
 
@@ -64,12 +69,14 @@ class PlannerConfig:
     damping: float = 20.0
     mass: float = 1.0
     q: float = 500.0
-    n_points: int = 50
+    n_points: int = 40
     max_pitch_deg: float = 45.0
     max_turn_deg: float = 60.0
     entry_candidates: int = 3
+    routes: int = 6
     box_divisions: int = 2
     optimise: bool = True
+    confine_to_box: bool = True
     max_smoothing_steps: int = 4000
 
     def validated(self) -> 'PlannerConfig':
@@ -89,6 +96,7 @@ class PlannerConfig:
             ('max_pitch_deg', 0 < self.max_pitch_deg <= 90, 'must be in (0, 90]'),
             ('max_turn_deg', 0 < self.max_turn_deg <= 180, 'must be in (0, 180]'),
             ('entry_candidates', 1 <= self.entry_candidates <= 64, 'must be in 1..64'),
+            ('routes', 1 <= self.routes <= 32, 'must be in 1..32'),
             ('box_divisions', 1 <= self.box_divisions <= 16, 'must be in 1..16'),
             ('max_smoothing_steps', self.max_smoothing_steps >= 0, 'must be >= 0'),
         ]
@@ -110,10 +118,11 @@ class PlanResult:
         exit: Exit node id (0-based).
         node_sequence: Dijkstra node ids from entry to exit.
         initial_path: Start, the Dijkstra nodes, goal, (m, 3) [m].
-        smoothed_path: Rest state of the mass-spring chain, (n+1, 3) [m].
+        smoothed_path: Rest state of the mass-spring chain, (n+1, 3) [m]; None when
+            'best' went straight to the direct minimisation.
         path: Final path, (n+1, 3) [m].
         initial_cost: Cost of initial_path.
-        smoothed_cost: Cost of smoothed_path.
+        smoothed_cost: Cost of smoothed_path, or None.
         cost: Cost of the final path.
         k: Spring coefficient of the smoothing that produced the final path.
         angles: Angle check of the final path.
@@ -121,6 +130,7 @@ class PlanResult:
         smoothing_converged: Whether that integration met its stopping rule.
         candidates: Final J for each (entry, exit) pair tried (Case 1), or empty.
         k_sweep: Final J (inf if infeasible) for each k tried (Case 3), or empty.
+        seed: Which start the final path grew from ('route i' or 'straight line').
         edge_cutoff: Cut-off radius of the edge costs [m], None if exact.
         timings_ms: Wall time per stage [ms].
     """
@@ -132,10 +142,10 @@ class PlanResult:
     exit: int
     node_sequence: list[int]
     initial_path: NDArray
-    smoothed_path: NDArray
+    smoothed_path: NDArray | None
     path: NDArray
     initial_cost: Cost
-    smoothed_cost: Cost
+    smoothed_cost: Cost | None
     cost: Cost
     k: float
     angles: AngleCheck
@@ -143,6 +153,7 @@ class PlanResult:
     smoothing_converged: bool
     candidates: dict[tuple[int, int], float] = field(default_factory=dict)
     k_sweep: dict[float, float] = field(default_factory=dict)
+    seed: str = 'route 0'
     edge_cutoff: float | None = None
     timings_ms: dict[str, float] = field(default_factory=dict)
 
@@ -159,13 +170,15 @@ class PlanResult:
             'initial_path': self.initial_path.tolist(),
             'path': self.path.tolist(),
             'cost': {'initial': self.initial_cost.as_dict(),
-                     'smoothed': self.smoothed_cost.as_dict(),
+                     'smoothed': None if self.smoothed_cost is None
+                     else self.smoothed_cost.as_dict(),
                      'final': self.cost.as_dict()},
             'network': {'nodes': self.network.n_nodes, 'edges': self.network.n_edges},
             'entry': self.entry,
             'exit': self.exit,
             'node_sequence': self.node_sequence,
             'k': self.k,
+            'seed': self.seed,
             'feasible': self.feasible,
             'angles': {'max_pitch_deg': self.angles.max_pitch_deg,
                        'max_turn_deg': self.angles.max_turn_deg,
@@ -192,16 +205,19 @@ class _Clock:
 
 @dataclass
 class _Candidate:
-    """One smoothed path under consideration."""
+    """One path under consideration, from its network route to its final form."""
 
     seq: list[int]
     initial: NDArray
-    smoothed: NDArray
+    smoothed: NDArray | None
+    smoothed_cost: Cost | None
+    final: NDArray
     k: float
     steps: int
     converged: bool
     cost: Cost
     angles: AngleCheck
+    seed: str = 'route 0'
 
 
 def check_endpoints(start: ArrayLike, goal: ArrayLike, box: Box,
@@ -263,8 +279,8 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         r = smooth(chain, threats.positions, threats.intensities, k, config.damping,
                    config.mass, config.q, max_steps=config.max_smoothing_steps)
         pts = box.clip(r.points)
-        return _Candidate(seq, initial, pts, k, r.steps, r.converged,
-                          path_cost(pts, threats.positions, threats.intensities, w),
+        c = path_cost(pts, threats.positions, threats.intensities, w)
+        return _Candidate(seq, initial, pts, c, pts, k, r.steps, r.converged, c,
                           check_angles(pts, config.max_pitch_deg, config.max_turn_deg))
 
     candidates: dict[tuple[int, int], float] = {}
@@ -301,11 +317,12 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
                                   threats, edge_j.radius)
         len_s = np.linalg.norm(network.nodes[entries] - s, axis=1)
         len_t = np.linalg.norm(network.nodes[exits] - t, axis=1)
-        seq, _ = dijkstra_with_terminals(network, weights, w * legs_s + (1 - w) * len_s,
-                                         entries, w * legs_t + (1 - w) * len_t, exits)
+        routes = alternative_routes(network, weights, w * legs_s + (1 - w) * len_s, entries,
+                                    w * legs_t + (1 - w) * len_t, exits, config.routes)
         clock.lap('search_ms')
-        best = smooth_seq(seq, config.k)
-        clock.lap('smoothing_ms')
+        if not config.optimise:
+            best = smooth_seq(routes[0], config.k)
+            clock.lap('smoothing_ms')
 
     if config.method == 'improved' or (config.auto_k and config.method != 'best'):
         feasible_best = best if best.angles.feasible else None
@@ -320,20 +337,9 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         best = feasible_best or best
         clock.lap('k_sweep_ms')
 
-    final = best.smoothed
-    final_cost = best.cost
-    final_angles = best.angles
     if config.method == 'best' and config.optimise:
-        cutoff = None if edge_j.radius is None else 2.0 * edge_j.radius
-        starts = [best.smoothed, resample(best.initial, config.n_points)]
-        for x0 in starts:
-            opt = minimise_cost(x0, threats, w, box, config.max_pitch_deg,
-                                config.max_turn_deg, cutoff=cutoff)
-            c = path_cost(opt.points, threats.positions, threats.intensities, w)
-            a = check_angles(opt.points, config.max_pitch_deg, config.max_turn_deg)
-            if (a.feasible, -c.J) > (final_angles.feasible, -final_cost.J):
-                final, final_cost, final_angles = opt.points, c, a
-        clock.lap('optimisation_ms')
+        best = _optimise_routes(routes, network, s, t, threats, box, config, edge_j,
+                                clock)
 
     timings = dict(clock.ms)
     timings['total_ms'] = float(sum(clock.ms.values()))
@@ -341,12 +347,50 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
     return PlanResult(
         method=config.method, w=w, network=network, entry=seq[0] if seq else -1,
         exit=seq[-1] if seq else -1, node_sequence=list(seq), initial_path=best.initial,
-        smoothed_path=best.smoothed, path=final,
+        smoothed_path=best.smoothed, path=best.final,
         initial_cost=path_cost(best.initial, threats.positions, threats.intensities, w),
-        smoothed_cost=best.cost, cost=final_cost, k=best.k, angles=final_angles,
+        smoothed_cost=best.smoothed_cost, cost=best.cost, k=best.k, angles=best.angles,
         smoothing_steps=best.steps, smoothing_converged=best.converged,
-        candidates=candidates, k_sweep=k_sweep,
+        candidates=candidates, k_sweep=k_sweep, seed=best.seed,
         edge_cutoff=None if edge_j is None else edge_j.radius, timings_ms=timings)
+
+
+def _optimise_routes(routes: list[list[int]], network: Network, s: NDArray, t: NDArray,
+                     threats: ThreatField, box: Box, config: PlannerConfig,
+                     edge_j: EdgeCosts, clock: _Clock) -> _Candidate:
+    """Screen every route and the straight line coarsely, then refine the lowest-J one.
+
+    Each route lies in its own basin of J (it passes the threats on its own sides); a cheap
+    coarse minimisation of each tells the basins apart before the fine one runs once.
+    """
+    w = config.w
+    bounds = box if config.confine_to_box else None
+    cutoff = None if edge_j.radius is None else 2.0 * edge_j.radius
+    f_pos, f_int = threats.positions, threats.intensities
+    # The straight line is the other natural start, and wins when length dominates.
+    seeds = [(f'route {i}', seq) for i, seq in enumerate(routes)] + [('straight line', [])]
+    best = None
+    for name, seq in seeds:
+        initial = np.vstack([s, network.nodes[seq], t]) if seq else np.vstack([s, t])
+        coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
+                               90.0, 180.0, cutoff=cutoff,
+                               tolerance=COARSE_TOLERANCE).points
+        j = path_cost(coarse, f_pos, f_int, w).J
+        if best is None or j < best[0]:
+            best = (j, name, seq, initial, coarse)
+    clock.lap('screening_ms')
+    _, name, seq, initial, coarse = best
+    if not seq:
+        # Report the best network route as the initial path even when the line won.
+        seq = routes[0]
+        initial = np.vstack([s, network.nodes[seq], t])
+    opt = minimise_cost(resample(coarse, config.n_points), threats, w, bounds,
+                        config.max_pitch_deg, config.max_turn_deg, cutoff=cutoff)
+    clock.lap('optimisation_ms')
+    return _Candidate(seq, initial, None, None, opt.points, float('nan'), 0, True,
+                      path_cost(opt.points, f_pos, f_int, w),
+                      check_angles(opt.points, config.max_pitch_deg, config.max_turn_deg),
+                      seed=name)
 
 
 def with_overrides(config: PlannerConfig, **changes: object) -> PlannerConfig:

@@ -172,3 +172,43 @@ def dijkstra_with_terminals(network: Network, weights: NDArray, start_costs: NDA
         raise PlanningError('network: the goal is not reachable from the start')
     seq = _walk_back(pred, s, t)
     return seq[1:-1], float(dist[t])
+
+
+def alternative_routes(network: Network, weights: NDArray, start_costs: NDArray,
+                       entries: NDArray, goal_costs: NDArray, exits: NDArray, count: int,
+                       penalty: float = 3.0) -> list[list[int]]:
+    """Up to ``count`` distinct routes: the best, then each next with used edges penalised.
+
+    Different routes usually pass different sides of the threats, i.e. lie in different
+    basins of J, which a local optimiser cannot cross; trying several is cheap insurance.
+
+    Args:
+        network: The network.
+        weights: Edge weights, (E,).
+        start_costs: Weight of the start's legs to ``entries``.
+        entries: Entry candidate nodes.
+        goal_costs: Weight of the goal's legs from ``exits``.
+        exits: Exit candidate nodes.
+        count: Most routes returned.
+        penalty: Factor applied to the weight of every edge already used.
+
+    Returns:
+        Node sequences, best first, without repeats.
+    """
+    w = np.array(weights, float)
+    m = network.n_nodes
+    keys = network.edges[:, 0] * m + network.edges[:, 1]
+    order = np.argsort(keys)
+    routes: list[list[int]] = []
+    for _ in range(max(1, 2 * count)):
+        seq, _ = dijkstra_with_terminals(network, w, start_costs, entries, goal_costs, exits)
+        if seq not in routes:
+            routes.append(seq)
+            if len(routes) == count:
+                break
+        if len(seq) < 2:
+            break
+        s = np.asarray(seq)
+        used = np.minimum(s[:-1], s[1:]) * m + np.maximum(s[:-1], s[1:])
+        w[order[np.searchsorted(keys, used, sorter=order)]] *= penalty
+    return routes

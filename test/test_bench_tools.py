@@ -1,0 +1,135 @@
+"""Fast tests of the benchmark's own pieces (bench/bench_tools.py)."""
+
+import importlib
+import json
+from pathlib import Path
+import sys
+
+import numpy as np
+import pytest
+
+from threat_planner.cost import path_cost
+from threat_planner.scenario import load_scenario
+from threat_planner.threats import Box, ThreatField
+
+BENCH = Path(__file__).resolve().parents[1] / 'bench'
+DATA = Path(__file__).resolve().parent / 'data'
+if str(BENCH) not in sys.path:
+    sys.path.insert(0, str(BENCH))
+bt = importlib.import_module('bench_tools')
+
+needs_ompl = pytest.mark.skipif(not bt.ompl_available(), reason='ompl cannot import')
+
+
+def _rel(a, b):
+    return abs(a - b) / max(abs(b), 1e-300)
+
+
+@pytest.fixture(scope='module')
+def scenario():
+    return load_scenario(DATA / 'uniform20_0.yaml')
+
+
+def test_load_reference_parses_keys(tmp_path):
+    path = tmp_path / 'reference.json'
+    path.write_text(json.dumps({'a_b@0.2': {'J': 1.5, 'seconds': 2.0},
+                                'x@0.8': {'J': 3.0}}))
+    ref = bt.load_reference(path)
+    assert ref[('a_b', 0.2)] == {'J': 1.5, 'seconds': 2.0}
+    assert ref[('x', 0.8)]['J'] == 3.0
+    assert np.isnan(ref[('x', 0.8)]['seconds'])
+
+
+def test_load_reference_bundled():
+    ref = bt.load_reference(DATA / 'reference.json')
+    assert ('uniform20_0', 0.8) in ref
+    assert len(ref) == 3 * len({name for name, _ in ref})
+    assert all(v['J'] > 0 for v in ref.values())
+
+
+def test_load_reference_rejects_bad_key(tmp_path):
+    path = tmp_path / 'reference.json'
+    path.write_text(json.dumps({'nokey': {'J': 1.0}}))
+    with pytest.raises(ValueError):
+        bt.load_reference(path)
+
+
+@pytest.mark.parametrize('w', [0.2, 0.8])
+def test_segment_cost_equals_path_cost(scenario, w):
+    pos, f = scenario.threats.positions, scenario.threats.intensities
+    seg = bt.SegmentCost(pos, f, w)
+    rng = np.random.default_rng(3)
+    for k in range(300):
+        a, b = rng.uniform(0.0, 100.0, size=(2, 3))
+        if k % 3 == 0:   # aim at a threat: near-line pairs, beyond and before it
+            p = pos[rng.integers(len(pos))]
+            b = a + (p - a) * rng.choice([0.5, 0.9999, 1.0001, 2.0]) + rng.normal(0, 1e-7, 3)
+        expected = path_cost(np.array([a, b]), pos, f, w).J
+        assert _rel(seg(a, b), expected) < 1e-9
+    assert seg.calls == 300
+    assert seg(np.ones(3), np.ones(3)) == 0.0
+
+
+def test_grid_floor_path_and_cost(scenario):
+    th = scenario.threats
+    graph = bt.build_grid(th, scenario.start, scenario.goal, scenario.box, n=7)
+    for w in (0.2, 0.8):
+        pts, j, graph_j, _ = bt.grid_floor(graph, th, w)
+        np.testing.assert_array_equal(pts[0], scenario.start)
+        np.testing.assert_array_equal(pts[-1], scenario.goal)
+        assert j == path_cost(pts, th.positions, th.intensities, w).J
+        assert _rel(graph_j, j) < 1e-9
+        assert np.all(pts >= scenario.box.lo) and np.all(pts <= scenario.box.hi)
+
+
+def test_grid_floor_start_on_a_node():
+    th = ThreatField.from_arrays([[50.0, 50.0, 50.0]], [1e5])
+    box = Box.from_corners([0, 0, 0], [100, 100, 100])
+    start, goal = np.array([0.0, 0.0, 50.0]), np.array([100.0, 100.0, 50.0])
+    graph = bt.build_grid(th, start, goal, box, n=5)
+    pts, j, graph_j, _ = bt.grid_floor(graph, th, 0.5)
+    assert np.all(np.linalg.norm(np.diff(pts, axis=0), axis=1) > 0)
+    np.testing.assert_array_equal(pts[[0, -1]], [start, goal])
+    assert _rel(graph_j, j) < 1e-9
+
+
+def test_scale_problem_density():
+    for n in (20, 160):
+        th, start, goal, box = bt.scale_problem(n, seed=1)
+        assert len(th) == n
+        side = box.hi[0] - box.lo[0]
+        assert side == pytest.approx(100.0 * (n / 20) ** (1 / 3))
+        assert box.contains(start) and box.contains(goal)
+    a = bt.scale_problem(50, seed=2)[0].positions
+    np.testing.assert_array_equal(a, bt.scale_problem(50, seed=2)[0].positions)
+
+
+@needs_ompl
+def test_ompl_motion_cost_equals_path_cost(scenario):
+    th = scenario.threats
+    prob = bt.ompl_problem(th, scenario.start, scenario.goal, scenario.box, 0.5)
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        a, b = rng.uniform(0.0, 100.0, size=(2, 3))
+        s1, s2 = bt._state(prob.space, a), bt._state(prob.space, b)
+        got = prob.objective.motionCost(s1, s2).value()
+        assert _rel(got, path_cost(np.array([a, b]), th.positions, th.intensities, 0.5).J) < 1e-9
+        heur = prob.objective.motionCostHeuristic(s1, s2).value()
+        assert heur == pytest.approx(0.5 * np.linalg.norm(b - a)) and heur <= got
+    assert prob.objective.stateCost(s1).value() == 0.0
+
+
+@needs_ompl
+def test_ompl_planner_uses_our_motion_cost(scenario):
+    th = scenario.threats
+    bt.set_ompl_quiet()
+    runs = bt.run_ompl('RRTstar', th, scenario.start, scenario.goal, scenario.box, 0.8,
+                       [0.2, 0.4])
+    assert [r['budget_s'] for r in runs] == [0.2, 0.4]
+    for r in runs:
+        assert r['exact'] and r['motion_calls'] > 0
+        assert r['rel_diff'] < 1e-6
+        pts = np.array(r['path'])
+        np.testing.assert_allclose(pts[[0, -1]], [scenario.start, scenario.goal])
+        assert r['J'] == path_cost(pts, th.positions, th.intensities, 0.8).J
+    assert runs[1]['J'] <= runs[0]['J'] + 1e-12
