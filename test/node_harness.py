@@ -30,6 +30,8 @@ from threat_planner.conversions import plan_info_values, pointcloud2_from_threat
 
 REPO = Path(__file__).resolve().parents[1]
 PYTHON = sys.executable
+#: Shortens Fast DDS discovery on localhost from ~3 s to ~0.1 s (see the file).
+FASTDDS_PROFILE = Path(__file__).resolve().parent / 'fastdds_local_discovery.xml'
 
 LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
@@ -46,12 +48,18 @@ def domain_id(offset: int, span: int = 40) -> int:
     return offset + os.getpid() % span
 
 
+def set_discovery_env(env) -> None:
+    """Discovery on this host only, with the fast-announcing profile, unless set already."""
+    # Only this machine: DDS discovery must not leave the host.
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env.setdefault('FASTDDS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))
+
+
 def ros_env(domain: int, extra_pythonpath: Sequence[str] = ()) -> dict[str, str]:
     """Environment for a node process: the domain, localhost discovery, unbuffered output."""
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(domain)
-    # Only this machine: DDS discovery must not leave the host.
-    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    set_discovery_env(env)
     env['PYTHONUNBUFFERED'] = '1'
     env['RCUTILS_LOGGING_BUFFERED_STREAM'] = '0'
     paths = list(extra_pythonpath) + [str(REPO)]
@@ -149,7 +157,8 @@ class RosClient:
     """
 
     def __init__(self, domain: int, name: str = 'test_client') -> None:
-        os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+        # Read when the first participant of this process is created.
+        set_discovery_env(os.environ)
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node(name, context=self.context)

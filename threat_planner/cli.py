@@ -44,7 +44,7 @@ def _config_from(args: argparse.Namespace) -> PlannerConfig:
 
 
 def _progress_bar(total: int, desc: str):
-    """A tqdm bar on stderr, shown only for sweeps that run for more than a second."""
+    """Make a tqdm bar on stderr, shown only for sweeps that run for more than a second."""
     from tqdm import tqdm
     return tqdm(total=total, desc=desc, delay=1.0, leave=False, file=sys.stderr)
 
@@ -105,7 +105,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``threat-planner``."""
+    """Build the argument parser of ``threat-planner``."""
     parser = _Parser(prog='threat-planner',
                      description='Threat-aware 3-D UAV path planning (Qu, Zhang, Zhang).')
     sub = parser.add_subparsers(dest='command', required=True, parser_class=_Parser)

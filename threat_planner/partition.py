@@ -73,14 +73,14 @@ class Network:
         return cKDTree(self.nodes)
 
     def delaunay_edges(self) -> NDArray:
-        """Unique vertex pairs of the tetrahedra's edges, (K, 2) indices into vertices."""
+        """Return the tetrahedra's unique edges, (K, 2) indices into vertices."""
         t = self.tetrahedra
         pairs = np.concatenate([t[:, [i, j]] for i in range(4) for j in range(i + 1, 4)])
         pairs.sort(axis=1)
         return np.unique(pairs, axis=0)
 
     def to_networkx(self) -> nx.Graph:
-        """The network as a networkx graph, for inspection (node attr ``pos``, edge ``length``).
+        """Return the network as a networkx graph (node attr ``pos``, edge attr ``length``).
 
         Returns:
             Undirected graph on node ids 0..M-1.
@@ -181,7 +181,7 @@ def build_network(positions: NDArray, box: Box, box_divisions: int = 2) -> Netwo
 
 
 def bare_network(positions: NDArray) -> Network:
-    """The paper's network exactly: Delaunay of the threats alone, no box (Figs. 4-7).
+    """Build the paper's network exactly: Delaunay of the threats alone, no box (Figs. 4-7).
 
     Args:
         positions: Threat positions, shape (N >= 4, 3), not all on one plane [m].

@@ -394,5 +394,5 @@ def _optimise_routes(routes: list[list[int]], network: Network, s: NDArray, t: N
 
 
 def with_overrides(config: PlannerConfig, **changes: object) -> PlannerConfig:
-    """A copy of config with the non-None changes applied and validated."""
+    """Return a copy of config with the non-None changes applied and validated."""
     return replace(config, **{k: v for k, v in changes.items() if v is not None}).validated()

@@ -45,13 +45,11 @@ one event lists every parameter of this node as new, then each accepted change f
 from __future__ import annotations
 
 import collections
-import contextlib
 from dataclasses import dataclass
 import math
-import signal
 import threading
 import time
-from typing import Callable, Iterator, Mapping, Optional, Sequence
+from typing import Callable, Mapping, Optional, Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
@@ -61,14 +59,9 @@ import numpy as np
 from numpy.typing import NDArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterEvent, SetParametersResult)
-import rclpy
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
 
@@ -78,6 +71,7 @@ from threat_planner.conversions import (network_markers, path_to_msg, plan_info_
 from threat_planner.errors import InputError, PlanningError, RecordingError
 from threat_planner.planner import check_endpoints, plan, PlannerConfig, PlanResult
 from threat_planner.recording import McapRecorder, TopicQos
+from threat_planner.ros_main import run_node
 from threat_planner.threats import as_point, Box, ThreatField
 
 __all__ = ['NodeSettings', 'PARAMETER_DEFAULTS', 'PlanWorker', 'ThreatPlannerNode', 'main',
@@ -798,24 +792,8 @@ def _result_values(result: PlanResult, n_threats: int) -> dict[str, object]:
 # ---------------------------------------------------------------------------- main
 
 
-@contextlib.contextmanager
-def _ros_initialised(args: Optional[list[str]]) -> Iterator[None]:
-    """``with rclpy.init(args=args):`` for every rclpy: Jazzy's init returns None."""
-    # rclpy keeps SIGINT (KeyboardInterrupt / ExternalShutdownException); main() handles
-    # SIGTERM itself so that it can finish the recording before the context goes away.
-    handle = rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.SIGINT)
-    if handle is not None:
-        with handle:
-            yield
-        return
-    try:
-        yield
-    finally:
-        rclpy.try_shutdown()
-
-
 def main(args: Optional[list[str]] = None) -> int:
-    """Run the node until SIGINT or SIGTERM.
+    """Run the node until SIGINT or SIGTERM, then close the recording and exit.
 
     Parameters
     ----------
@@ -828,39 +806,7 @@ def main(args: Optional[list[str]] = None) -> int:
         0 after a clean shutdown, 1 if the start-up parameters were refused.
 
     """
-    stop = threading.Event()
-
-    def on_sigterm(signum, frame) -> None:
-        stop.set()
-
-    previous = signal.signal(signal.SIGTERM, on_sigterm)
-    try:
-        with _ros_initialised(args):
-            node = None
-            executor = SingleThreadedExecutor()
-            try:
-                try:
-                    node = ThreatPlannerNode()
-                except (InputError, RecordingError, ParameterException) as exc:
-                    get_logger(NODE_NAME).fatal(f'cannot start: {exc}')
-                    return 1
-                executor.add_node(node)
-                # A bounded wait lets the loop notice SIGTERM (Python runs signal handlers
-                # only between bytecodes, not inside rcl_wait).
-                while not stop.is_set() and rclpy.ok():
-                    executor.spin_once(timeout_sec=0.1)
-            except (KeyboardInterrupt, ExternalShutdownException):
-                pass
-            finally:
-                if node is not None:
-                    node.close()
-                    executor.remove_node(node)
-                    node.destroy_node()
-                executor.shutdown()
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
-    return 0
+    return run_node(ThreatPlannerNode, NODE_NAME, args)
 
 
 if __name__ == '__main__':

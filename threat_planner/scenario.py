@@ -48,7 +48,7 @@ class Scenario:
     threats: ThreatField
 
     def to_dict(self) -> dict:
-        """The scenario in the YAML file layout."""
+        """Return the scenario in the YAML file layout."""
         return {
             'name': self.name, 'frame_id': self.frame_id, 'description': self.description,
             'bounds': {'min': self.box.lo.tolist(), 'max': self.box.hi.tolist()},

@@ -86,7 +86,7 @@ def edge_threat_costs(network: Network, threats: ThreatField, box_spacing: float
 
 
 def nearest_nodes(network: Network, point: NDArray, k: int) -> NDArray:
-    """The k nodes nearest to a point (entry or exit candidates), nearest first.
+    """Return the k nodes nearest to a point (entry or exit candidates), nearest first.
 
     Args:
         network: The network.

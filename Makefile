@@ -1,0 +1,32 @@
+# Two commands for a fresh machine: `make demo` (set-up plus the main job) and `make test`.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: venv demo plan-demo test bench clean
+
+$(STAMP): setup.py setup.cfg package.xml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e '.[ros,record,test,bench]'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+# Plans the bundled 20-threat scenario, prints J and timings, writes the figure and JSON.
+plan-demo: venv
+	$(BIN)/threat-planner plan test/data/uniform20_0.yaml --plot demo_out/plan.png \
+		--json demo_out/plan.json
+	@echo "figure: demo_out/plan.png"
+
+demo: plan-demo
+
+test: venv
+	$(BIN)/python -m pytest -q
+
+bench: venv
+	$(BIN)/python bench/run_benchmark.py
+
+clean:
+	rm -rf $(VENV) build install log demo_out .pytest_cache

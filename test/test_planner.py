@@ -1,0 +1,126 @@
+"""The whole pipeline: methods, degenerate inputs, errors, and quality against the yardstick."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from threat_planner.cost import path_cost
+from threat_planner.errors import InputError
+from threat_planner.planner import K_SWEEP, plan, PlannerConfig
+from threat_planner.scenario import load_scenario
+from threat_planner.threats import Box, ThreatField
+
+DATA = Path(__file__).parent / 'data'
+REFERENCE = json.loads((DATA / 'reference.json').read_text())
+
+
+@pytest.fixture(scope='module')
+def uniform():
+    return load_scenario(DATA / 'uniform20_0.yaml')
+
+
+def _check_plan(result, scenario, w):
+    """Invariants every plan must meet."""
+    th = scenario.threats
+    for pts in (result.initial_path, result.path):
+        assert np.allclose(pts[0], scenario.start) and np.allclose(pts[-1], scenario.goal)
+    assert np.all(result.path >= scenario.box.lo - 1e-9)
+    assert np.all(result.path <= scenario.box.hi + 1e-9)
+    again = path_cost(result.path, th.positions, th.intensities, w)
+    assert result.cost.J == pytest.approx(again.J, rel=1e-12)
+    assert result.initial_cost.J == pytest.approx(
+        path_cost(result.initial_path, th.positions, th.intensities, w).J, rel=1e-12)
+    assert set(result.timings_ms) >= {'partition_ms', 'search_ms', 'total_ms'}
+
+
+@pytest.mark.parametrize('method', ['paper', 'improved', 'best'])
+def test_every_method_gives_a_valid_plan(uniform, method):
+    r = plan(uniform.threats, uniform.start, uniform.goal, uniform.box,
+             PlannerConfig(w=0.5, method=method))
+    _check_plan(r, uniform, 0.5)
+    assert r.cost.J < r.initial_cost.J
+    nodes = r.network.nodes
+    # The initial path is start, the Dijkstra node sequence, goal.
+    assert np.allclose(r.initial_path[1:-1], nodes[r.node_sequence])
+    if method == 'paper':
+        nearest = np.argmin(np.linalg.norm(nodes - uniform.start, axis=1))
+        assert r.entry == nearest and r.k == 1000
+    if method == 'improved':
+        assert 1 <= len(r.candidates) <= 9
+        assert set(r.k_sweep) == {float(k) for k in K_SWEEP}
+        assert r.feasible
+        feasible = [j for j in r.k_sweep.values() if np.isfinite(j)]
+        assert r.cost.J == pytest.approx(min(feasible))
+    if method == 'best':
+        assert r.feasible
+
+
+def test_best_beats_the_paper_method(uniform):
+    for w in (0.2, 0.8):
+        cfg = PlannerConfig(w=w)
+        best = plan(uniform.threats, uniform.start, uniform.goal, uniform.box, cfg)
+        paper = plan(uniform.threats, uniform.start, uniform.goal, uniform.box,
+                     PlannerConfig(w=w, method='paper'))
+        assert best.cost.J < paper.cost.J
+
+
+@pytest.mark.parametrize('name,w', [('uniform20_1', 0.5), ('weak20_0', 0.8),
+                                    ('ground_0', 0.2), ('strongweak_0', 0.5)])
+def test_best_is_within_one_percent_of_the_yardstick(name, w):
+    # The yardstick's final L-BFGS was unbounded and had no angle limits; give ours the same.
+    sc = load_scenario(DATA / f'{name}.yaml')
+    cfg = PlannerConfig(w=w, confine_to_box=False, max_pitch_deg=90.0, max_turn_deg=180.0)
+    r = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
+    assert r.cost.J / REFERENCE[f'{name}@{w}']['J'] < 1.01
+
+
+BOX = Box.from_corners([0, 0, 0], [100, 100, 100])
+
+
+@pytest.mark.parametrize('positions', [
+    np.zeros((0, 3)), np.array([[50.0, 40.0, 50.0]]),
+    np.array([[30.0, 30, 30], [60, 60, 60], [40, 70, 20]]),
+    np.column_stack([np.random.default_rng(1).uniform(0, 100, (15, 2)), np.zeros(15)]),
+    np.array([[40.0, 50.0, 50.0]] * 5),
+], ids=['none', 'one', 'three', 'ground-plane', 'duplicates'])
+@pytest.mark.parametrize('method', ['paper', 'best'])
+def test_degenerate_threat_sets_plan(positions, method):
+    th = ThreatField.from_arrays(positions, np.full(len(positions), 1e5))
+    start, goal = np.array([0.0, 0.0, 50.0]), np.array([100.0, 100.0, 50.0])
+    r = plan(th, start, goal, BOX, PlannerConfig(w=0.5, method=method))
+    assert np.allclose(r.path[0], start) and np.allclose(r.path[-1], goal)
+    assert np.isfinite(r.cost.J)
+    if len(positions) == 0 and method == 'best':
+        # No threats: the best path is the straight line.
+        assert r.cost.J == pytest.approx(0.5 * np.linalg.norm(goal - start), rel=1e-6)
+
+
+def test_bad_inputs_raise_input_error_naming_the_field(uniform):
+    th = uniform.threats
+    with pytest.raises(InputError, match='start'):
+        plan(th, [-5.0, 0, 0], uniform.goal, uniform.box)
+    with pytest.raises(InputError, match='goal.*on threat 3'):
+        plan(th, uniform.start, th.positions[3], uniform.box)
+    with pytest.raises(InputError, match='w: must satisfy'):
+        plan(th, uniform.start, uniform.goal, uniform.box, PlannerConfig(w=1.0))
+    with pytest.raises(InputError, match='method'):
+        PlannerConfig(method='fast').validated()
+    with pytest.raises(InputError, match=r'threats\[1\].intensity'):
+        ThreatField.from_arrays([[0.0, 0, 0], [1, 1, 1]], [1.0, -2.0])
+    with pytest.raises(InputError, match=r'threats.position\[0\]: not finite'):
+        ThreatField.from_arrays([[np.nan, 0, 0]], [1.0])
+
+
+def test_large_field_uses_the_cut_off_and_reports_exact_cost():
+    rng = np.random.default_rng(5)
+    side = 100 * (1000 / 20) ** (1 / 3)
+    th = ThreatField.from_arrays(rng.uniform(0, side, (1000, 3)), rng.uniform(1e5, 4e5, 1000))
+    box = Box.from_corners([0, 0, 0], [side] * 3)
+    start, goal = np.array([0.0, 0.0, side / 2]), np.array([side, side, side / 2])
+    r = plan(th, start, goal, box, PlannerConfig(w=0.5))
+    assert r.edge_cutoff is not None
+    assert r.cost.J == pytest.approx(path_cost(r.path, th.positions, th.intensities, 0.5).J)
+    straight = path_cost(np.vstack([start, goal]), th.positions, th.intensities, 0.5).J
+    assert r.cost.J < straight

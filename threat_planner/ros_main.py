@@ -1,0 +1,106 @@
+"""Process entry helpers shared by the package's ROS 2 nodes: init, spin, clean shutdown."""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from typing import Callable, Iterator, Optional, Sequence
+
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.logging import get_logger
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from threat_planner.errors import ThreatPlannerError
+
+__all__ = ['ros_initialised', 'run_node']
+
+#: Longest the spin loop waits before it looks at the SIGTERM flag again [s].
+SPIN_PERIOD_S = 0.1
+
+
+@contextlib.contextmanager
+def ros_initialised(args: Optional[Sequence[str]]) -> Iterator[None]:
+    """Use ``with rclpy.init(args=args):`` on any rclpy (Jazzy's ``init`` returns None).
+
+    rclpy keeps its SIGINT handler (KeyboardInterrupt / ExternalShutdownException); SIGTERM
+    is left to :func:`run_node`, which finishes the node's work before the context ends.
+
+    Parameters
+    ----------
+    args : sequence of str, optional
+        Command line; ``sys.argv`` if None.
+
+    """
+    handle = rclpy.init(args=None if args is None else list(args),
+                        signal_handler_options=SignalHandlerOptions.SIGINT)
+    if handle is not None:
+        with handle:
+            yield
+        return
+    try:
+        yield
+    finally:
+        rclpy.try_shutdown()
+
+
+def run_node(factory: Callable[[], Node], name: str,
+             args: Optional[Sequence[str]] = None) -> int:
+    """Create a node and spin it until SIGINT or SIGTERM, then shut it down cleanly.
+
+    On shutdown the node's ``close()`` (if it has one) runs before the node is destroyed
+    and the context shut down, so recordings and worker threads end properly.
+
+    Parameters
+    ----------
+    factory : Callable[[], Node]
+        Builds the node (after rclpy is initialised).
+    name : str
+        Logger name for a refused start.
+    args : sequence of str, optional
+        Command line; ``sys.argv`` if None.
+
+    Returns
+    -------
+    int
+        0 after a clean shutdown, 1 if the factory refused its parameters or files.
+
+    """
+    stop = threading.Event()
+
+    def on_sigterm(signum, frame) -> None:
+        stop.set()
+
+    previous = signal.signal(signal.SIGTERM, on_sigterm)
+    try:
+        with ros_initialised(args):
+            node = None
+            executor = SingleThreadedExecutor()
+            try:
+                try:
+                    node = factory()
+                except (ThreatPlannerError, ParameterException) as exc:
+                    get_logger(name).fatal(f'cannot start: {exc}')
+                    return 1
+                executor.add_node(node)
+                # A bounded wait lets the loop see the SIGTERM flag: Python runs signal
+                # handlers only between bytecodes, never inside rcl_wait.
+                while not stop.is_set() and rclpy.ok():
+                    executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+            except (KeyboardInterrupt, ExternalShutdownException):
+                pass
+            finally:
+                if node is not None:
+                    close = getattr(node, 'close', None)
+                    if close is not None:
+                        close()
+                    executor.remove_node(node)
+                    node.destroy_node()
+                executor.shutdown()
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+    return 0

@@ -1,0 +1,250 @@
+"""
+ROS 2 node ``threat_publisher``: publishes a scenario file for the planner node.
+
+Run as ``threat_publisher --ros-args -p scenario:=FILE``. It publishes the scenario's
+threats (``threats``, sensor_msgs/PointCloud2 x, y, z, intensity; or ``threat_poses``,
+geometry_msgs/PoseArray, with ``use_pose_array:=true``), ``start`` and ``goal_pose``
+(geometry_msgs/PoseStamped), all reliable and transient local (latched, depth 1).
+
+* ``rate`` = 0 (default): the picture is published once and stays latched.
+* ``rate`` > 0: the picture is published at ``rate`` Hz, stamped with the publish time; with
+  ``drift`` > 0 [m/s] every threat moves between publications, deterministically for a given
+  ``seed``: ``drift_mode`` ``random_walk`` steps each threat ``drift / rate`` metres in a
+  random direction (reflected at the bounds), ``sinusoid`` swings each threat along a random
+  axis with period ``drift_period`` [s] and peak speed ``drift``.
+
+Start and goal are published at start-up and again whenever a new subscriber appears: a
+planner subscribes to them volatile (so that RViz's pose tools work) and would otherwise
+miss them if it starts after this node. Threats need no such help: the planner subscribes
+to them transient local and gets the latched picture.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped
+import numpy as np
+from numpy.typing import NDArray
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import PointCloud2
+
+from threat_planner.conversions import pointcloud2_from_threats
+from threat_planner.errors import InputError
+from threat_planner.ros_main import run_node
+from threat_planner.scenario import load_scenario, Scenario
+
+__all__ = ['ThreatDrift', 'ThreatPublisher', 'main']
+
+NODE_NAME = 'threat_publisher'
+DRIFT_MODES = ('random_walk', 'sinusoid')
+LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     history=HistoryPolicy.KEEP_LAST, depth=1)
+# How often to look for new start/goal subscribers [s].
+_MATCH_POLL_S = 0.2
+
+
+class ThreatDrift:
+    """Deterministic threat motion: a reflected random walk or a per-threat sinusoid.
+
+    Parameters
+    ----------
+    positions : NDArray
+        Initial threat positions (N, 3) [m].
+    lo, hi : NDArray
+        Bounds the threats stay in (3,) [m].
+    speed : float
+        Step length per second (random walk) or peak speed (sinusoid) [m/s].
+    mode : str
+        'random_walk' or 'sinusoid'.
+    period : float
+        Period of the sinusoid [s].
+    seed : int
+        Seed of the random directions and phases.
+
+    """
+
+    def __init__(self, positions: NDArray, lo: NDArray, hi: NDArray, speed: float,
+                 mode: str = 'random_walk', period: float = 20.0, seed: int = 0) -> None:
+        if mode not in DRIFT_MODES:
+            raise InputError(f'drift_mode: must be one of {", ".join(DRIFT_MODES)}, '
+                             f'got {mode!r}')
+        if not (math.isfinite(speed) and speed >= 0.0):
+            raise InputError(f'drift: must be finite and >= 0, got {speed!r}')
+        if not (math.isfinite(period) and period > 0.0):
+            raise InputError(f'drift_period: must be finite and > 0, got {period!r}')
+        self._p0 = np.array(positions, dtype=float).reshape(-1, 3)
+        self._p = self._p0.copy()
+        self._lo = np.asarray(lo, dtype=float)
+        self._hi = np.asarray(hi, dtype=float)
+        self._speed = float(speed)
+        self._mode = mode
+        self._rng = np.random.default_rng(seed)
+        n = len(self._p0)
+        self._axes = _unit_rows(self._rng.normal(size=(n, 3)))
+        self._phases = self._rng.uniform(0.0, 2.0 * math.pi, size=n)
+        self._omega = 2.0 * math.pi / period
+
+    def at(self, t: float, dt: float) -> NDArray:
+        """Positions at time `t` [s], `dt` [s] after the previous call.
+
+        The random walk depends on the sequence of calls (one step per call); the sinusoid
+        only on `t`.
+        """
+        if self._speed == 0.0 or len(self._p0) == 0:
+            return self._p.copy()
+        if self._mode == 'sinusoid':
+            amplitude = self._speed / self._omega
+            offset = amplitude * np.sin(self._omega * t + self._phases)
+            self._p = _reflect(self._p0 + offset[:, None] * self._axes, self._lo, self._hi)
+        else:
+            steps = _unit_rows(self._rng.normal(size=self._p.shape)) * (self._speed * dt)
+            self._p = _reflect(self._p + steps, self._lo, self._hi)
+        return self._p.copy()
+
+
+def _unit_rows(v: NDArray) -> NDArray:
+    norms = np.linalg.norm(v, axis=1, keepdims=True)
+    return v / np.where(norms > 0.0, norms, 1.0)
+
+
+def _reflect(p: NDArray, lo: NDArray, hi: NDArray) -> NDArray:
+    """Mirror points that left [lo, hi] back inside (a threat bounces off the bounds)."""
+    span = hi - lo
+    q = np.mod(p - lo, 2.0 * span)
+    return lo + np.where(q > span, 2.0 * span - q, q)
+
+
+class ThreatPublisher(Node):
+    """Publishes one scenario; see the module docstring.
+
+    Raises
+    ------
+    InputError
+        If parameter ``scenario`` is empty, the file is bad, or a parameter is out of range.
+
+    """
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.declare_parameter('scenario', '', ParameterDescriptor(
+            description='Scenario YAML file (bounds, start, goal, threats)'))
+        self.declare_parameter('rate', 0.0, ParameterDescriptor(
+            description='Publication rate [Hz]; 0 publishes once, latched',
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1000.0)]))
+        self.declare_parameter('drift', 0.0, ParameterDescriptor(
+            description='Threat speed [m/s] between publications (needs rate > 0)',
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1.0e6)]))
+        self.declare_parameter('drift_mode', 'random_walk', ParameterDescriptor(
+            description="'random_walk' or 'sinusoid'",
+            additional_constraints="one of 'random_walk', 'sinusoid'"))
+        self.declare_parameter('drift_period', 20.0, ParameterDescriptor(
+            description='Period of the sinusoidal drift [s]',
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1.0e6)]))
+        self.declare_parameter('seed', 0, ParameterDescriptor(
+            description='Seed of the drift'))
+        self.declare_parameter('use_pose_array', False, ParameterDescriptor(
+            description='Publish threats as a PoseArray on threat_poses (intensities are '
+                        "then the planner's default_intensity)"))
+        self.declare_parameter('frame_id', '', ParameterDescriptor(
+            description="Frame of the messages; '' = the scenario's frame_id"))
+
+        path = self.get_parameter('scenario').value
+        if not path:
+            raise InputError('scenario: give a scenario file with -p scenario:=FILE')
+        self._scenario: Scenario = load_scenario(path)
+        self._frame = self.get_parameter('frame_id').value or self._scenario.frame_id
+        self._rate = float(self.get_parameter('rate').value)
+        self._use_poses = bool(self.get_parameter('use_pose_array').value)
+        drift = float(self.get_parameter('drift').value)
+        box = self._scenario.box
+        self._drift = ThreatDrift(self._scenario.threats.positions, box.lo, box.hi, drift,
+                                  self.get_parameter('drift_mode').value,
+                                  float(self.get_parameter('drift_period').value),
+                                  int(self.get_parameter('seed').value))
+        if drift > 0.0 and self._rate == 0.0:
+            self.get_logger().warning('drift is ignored with rate 0 (published once)')
+        self._tick = 0
+
+        if self._use_poses:
+            self._pub_threats = self.create_publisher(PoseArray, 'threat_poses', LATCHED)
+        else:
+            self._pub_threats = self.create_publisher(PointCloud2, 'threats', LATCHED)
+        self._pub_start = self.create_publisher(PoseStamped, 'start', LATCHED)
+        self._pub_goal = self.create_publisher(PoseStamped, 'goal_pose', LATCHED)
+        self._matched = {'start': 0, 'goal': 0}
+
+        self._publish_pose(self._pub_start, self._scenario.start)
+        self._publish_pose(self._pub_goal, self._scenario.goal)
+        self._publish_threats()
+        self.create_timer(_MATCH_POLL_S, self._republish_to_new_subscribers)
+        if self._rate > 0.0:
+            self.create_timer(1.0 / self._rate, self._publish_threats)
+        self.get_logger().info(
+            f'{self._scenario.name}: {len(self._scenario.threats)} threats on '
+            f'{self._pub_threats.topic_name} in frame {self._frame}, '
+            + (f'{self._rate:g} Hz, drift {drift:g} m/s' if self._rate > 0.0
+               else 'published once (latched)'))
+
+    def _stamp(self):
+        return self.get_clock().now().to_msg()
+
+    def _publish_pose(self, publisher, xyz: NDArray) -> None:
+        msg = PoseStamped()
+        msg.header.frame_id = self._frame
+        msg.header.stamp = self._stamp()
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (
+            float(v) for v in xyz)
+        msg.pose.orientation.w = 1.0
+        publisher.publish(msg)
+
+    def _publish_threats(self) -> None:
+        dt = 1.0 / self._rate if self._rate > 0.0 else 0.0
+        positions = self._drift.at(self._tick * dt, dt if self._tick else 0.0)
+        self._tick += 1
+        stamp = self._stamp()
+        if self._use_poses:
+            msg = PoseArray()
+            msg.header.frame_id = self._frame
+            msg.header.stamp = stamp
+            msg.poses = [Pose() for _ in range(len(positions))]
+            for pose, (x, y, z) in zip(msg.poses, positions.tolist()):
+                pose.position.x, pose.position.y, pose.position.z = x, y, z
+                pose.orientation.w = 1.0
+        else:
+            msg = pointcloud2_from_threats(positions, self._scenario.threats.intensities,
+                                           self._frame, stamp)
+        self._pub_threats.publish(msg)
+
+    def _republish_to_new_subscribers(self) -> None:
+        for key, pub, xyz in (('start', self._pub_start, self._scenario.start),
+                              ('goal', self._pub_goal, self._scenario.goal)):
+            count = pub.get_subscription_count()
+            if count > self._matched[key]:
+                self._publish_pose(pub, xyz)
+            self._matched[key] = count
+
+
+def main(args: Optional[list[str]] = None) -> int:
+    """Run the publisher until SIGINT or SIGTERM.
+
+    Parameters
+    ----------
+    args : list of str, optional
+        Command line (``--ros-args -p scenario:=FILE ...``); ``sys.argv`` if None.
+
+    Returns
+    -------
+    int
+        0 after a clean shutdown, 1 if the scenario or a parameter was refused.
+
+    """
+    return run_node(ThreatPublisher, NODE_NAME, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
