@@ -366,6 +366,7 @@ def run_ompl(planner: str, threats: ThreatField, start: NDArray, goal: NDArray, 
             rec.update(J=j, J_ompl=j_ompl, rel_diff=abs(j_ompl - j) / max(abs(j), 1e-300),
                        n_states=len(pts), path=pts.tolist())
         out.append(rec)
+    pl.clear()  # free the tree: the bindings keep these objects alive
     return out
 
 

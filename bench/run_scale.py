@@ -10,10 +10,11 @@ For N = 20, 100, 300, 1000, 3000 and 10000 threats placed uniformly at random (f
 in a cube of side ``100 (N / 20)^(1/3)`` m, the density of the 20-threat scenarios, with
 start and goal at opposite corners at mid height, and then for the shared
 ``scale1000.yaml`` and ``scale10000.yaml``, a fresh subprocess per problem runs ``plan``
-(``best``, w = 0.5) ``--repeats`` times on a freshly built ``ThreatField`` and reports:
+(``best``, w = 0.5) ``--repeats`` times (fewer once the runs pass 10 s) on a freshly built
+``ThreatField`` and reports:
 
 * the median of each stage of ``PlanResult.timings_ms`` and of the wall time of ``plan``;
-* the process's peak resident set size (``ru_maxrss``) and its growth over the baseline
+* the process's peak resident set size (``VmHWM``) and its growth over the baseline
   measured after imports and problem set-up;
 * the peak of Python-heap allocations during one more ``plan`` under ``tracemalloc``
   (numpy's buffers included).
@@ -41,6 +42,8 @@ QUICK_SIZES = (20, 100, 300, 1000)
 FILES = ('scale1000', 'scale10000')
 SEED = 7
 W = 0.5
+#: Stop repeating a problem once its runs have taken this long [ms].
+REPEAT_BUDGET_MS = 10_000.0
 
 
 def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: float) -> dict:
@@ -67,7 +70,6 @@ def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: floa
         ``tracemalloc_peak_mb``.
     """
     import gc
-    import resource
     import time
     import tracemalloc
 
@@ -84,7 +86,7 @@ def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: floa
     positions, intensities = field.positions.copy(), field.intensities.copy()
     config = PlannerConfig(w=w, method='best')
     gc.collect()
-    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    rss0 = peak_rss_mb()
     walls, stages, res = [], [], None
     for _ in range(repeats):
         fresh = ThreatField.from_arrays(positions, intensities)
@@ -92,7 +94,9 @@ def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: floa
         res = plan(fresh, start, goal, box, config)
         walls.append(1e3 * (time.perf_counter() - t0))
         stages.append(res.timings_ms)
-    rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+        if sum(walls) > REPEAT_BUDGET_MS:
+            break
+    rss1 = peak_rss_mb()
     keys = list(dict.fromkeys(k for s in stages for k in s))
     j = float(res.cost.J)
     del res
@@ -102,12 +106,29 @@ def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: floa
     plan(fresh, start, goal, box, config)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    return {'n': len(positions), 'name': name, 'w': w, 'repeats': repeats,
+    return {'n': len(positions), 'name': name, 'w': w, 'repeats': len(walls),
             'wall_ms': statistics.median(walls), 'wall_runs_ms': walls,
             'timings_ms': {k: statistics.median(s.get(k, 0.0) for s in stages) for k in keys},
             'J': j, 'side_m': float(box.hi[0] - box.lo[0]),
             'baseline_rss_mb': rss0, 'peak_rss_mb': rss1, 'rss_growth_mb': rss1 - rss0,
             'tracemalloc_peak_mb': peak / 2 ** 20}
+
+
+def peak_rss_mb() -> float:
+    """Return this process's peak resident set size [MiB].
+
+    Reads ``VmHWM`` from ``/proc/self/status``: unlike ``ru_maxrss``, which Linux carries
+    over from the parent through fork and exec, it covers only this process's own memory.
+    Falls back to ``ru_maxrss`` where ``/proc`` is missing.
+    """
+    try:
+        for line in Path('/proc/self/status').read_text().splitlines():
+            if line.startswith('VmHWM:'):
+                return float(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    import resource
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _run_worker(extra: list[str], repeats: int, seed: int, w: float) -> dict:
@@ -132,12 +153,13 @@ def render_markdown(data: dict) -> str:
     """Render the ``scale.md`` report from the results."""
     rows = data['sizes'] + data['files']
     keys = _stage_keys(rows)
-    head = ['problem', 'N', 'side m'] + [k.replace('_ms', ' ms') for k in keys] + [
+    head = ['problem', 'N', 'side m', 'runs'] + [k.replace('_ms', ' ms') for k in keys] + [
         'wall ms', 'J', 'peak RSS MiB', 'RSS growth MiB', 'tracemalloc peak MiB']
     lines = ['| ' + ' | '.join(head) + ' |', '|---|' + '---:|' * (len(head) - 1)]
     for r in rows:
         side = r.get('side_m')
-        cells = [r['name'], str(r['n']), f'{side:.0f}' if side else '-']
+        cells = [r['name'], str(r['n']), f'{side:.0f}' if side else '-',
+                 str(r['repeats'])]
         cells += [f"{r['timings_ms'].get(k, 0.0):.1f}" for k in keys]
         cells += [f"{r['wall_ms']:.1f}", f"{r['J']:.2f}", f"{r['peak_rss_mb']:.0f}",
                   f"{r['rss_growth_mb']:.0f}", f"{r['tracemalloc_peak_mb']:.1f}"]
@@ -148,7 +170,7 @@ def render_markdown(data: dict) -> str:
         'cube of side 100 (N/20)^(1/3) m (the 20-threat scenarios\' density), start and goal '
         'at opposite corners at mid height; then the shared scale1000.yaml and '
         f"scale10000.yaml. Stage times are `PlanResult.timings_ms`, median of {data['repeats']} "
-        'run(s); wall ms is the whole `plan` call on a freshly built ThreatField (it adds '
+        'run(s) (fewer, shown as runs, once they pass 10 s); wall ms is the whole `plan` call on a freshly built ThreatField (it adds '
         'input checks and the k-d tree). Each problem runs in a fresh subprocess: peak RSS is '
         'the process\'s high-water mark (interpreter and libraries included), RSS growth is '
         'that over the baseline after imports and set-up, and the tracemalloc peak is the '

@@ -189,7 +189,7 @@ class RosClient:
 
     def publisher(self, topic: str, msg_type: type, qos: QoSProfile = LATCHED):
         """A (cached) publisher."""
-        key = (topic, msg_type)
+        key = (topic, msg_type, id(qos))
         if key not in self._publishers:
             self._publishers[key] = self.node.create_publisher(msg_type, topic, qos)
         return self._publishers[key]

@@ -62,8 +62,8 @@ def test_alternative_routes_are_distinct_and_best_first(net):
 
 def test_cut_off_edge_costs_stay_within_their_stated_bound():
     rng = np.random.default_rng(2)
-    threats = ThreatField.from_arrays(rng.uniform(0, 400, (1500, 3)), rng.uniform(1e5, 3e5, 1500))
-    box = Box.from_corners([0, 0, 0], [400, 400, 400])
+    threats = ThreatField.from_arrays(rng.uniform(0, 300, (700, 3)), rng.uniform(1e5, 3e5, 700))
+    box = Box.from_corners([0, 0, 0], [300, 300, 300])
     net = build_network(threats.positions, box)
     exact = edge_threat_costs(net, threats, threats.typical_spacing(box), exact=True)
     cut = edge_threat_costs(net, threats, threats.typical_spacing(box), exact=False)
