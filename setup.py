@@ -15,7 +15,8 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/scenarios', glob('test/data/*.yaml')),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'networkx', 'PyYAML', 'matplotlib', 'tqdm'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'networkx', 'PyYAML', 'matplotlib', 'tqdm',
+                      'threadpoolctl'],
     extras_require={
         'ros': [
             'ros-jazzy-rclpy[fastrtps]',

@@ -13,7 +13,8 @@ SOURCES = ['threat_planner', 'test', 'bench', 'launch', 'setup.py']
 @pytest.mark.linter
 def test_flake8():
     pytest.importorskip('flake8')
-    p = subprocess.run([sys.executable, '-m', 'flake8', *SOURCES], cwd=ROOT,
+    present = [s for s in SOURCES if (ROOT / s).exists()]
+    p = subprocess.run([sys.executable, '-m', 'flake8', *present], cwd=ROOT,
                        capture_output=True, text=True)
     assert p.returncode == 0, p.stdout + p.stderr
 

@@ -85,7 +85,7 @@ def angle_constraints(points: NDArray, max_pitch_deg: float, max_turn_deg: float
 def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | None,
                   max_pitch_deg: float, max_turn_deg: float, cutoff: float | None = None,
                   max_iterations: int = 1000, tolerance: float = 1e-7,
-                  constrained_iterations: int = 200) -> OptimisationResult:
+                  constrained_iterations: int = 100) -> OptimisationResult:
     """Minimise J over the interior vertices within the box and the angle limits.
 
     L-BFGS-B first minimises J within the box alone, which is fast; if the result breaks an

@@ -20,6 +20,7 @@ from typing import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from threadpoolctl import threadpool_limits
 
 from threat_planner.cost import Cost, path_cost
 from threat_planner.errors import InputError
@@ -263,6 +264,14 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
     """
     config.validated()
     s, t = check_endpoints(start, goal, box, threats)
+    # The optimisers make thousands of tiny BLAS calls; a threaded BLAS spends longer waking
+    # its threads than computing, and far longer when the cores are busy (measured: 4x).
+    with threadpool_limits(1, user_api='blas'):
+        return _plan(threats, s, t, box, config, progress)
+
+
+def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: PlannerConfig,
+          progress: Callable[[int, int], None] | None) -> PlanResult:
     clock = _Clock()
     network = build_network(threats.positions, box, config.box_divisions)
     clock.lap('partition_ms')
