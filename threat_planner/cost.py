@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+#: Pairs evaluated at once by the pair-wise costs.
+PAIR_CHUNK = 262_144
 #: Threats whose closest approach to a segment is below this are treated as hit [m].
 CONTACT_DISTANCE = 1e-9
 
@@ -345,5 +347,10 @@ def pair_threat_costs(a: NDArray, b: NDArray, positions: NDArray, intensities: N
     Returns:
         Array (S,) of threat costs over the pairs given.
     """
-    vals = pair_integrals(a[seg], b[seg], positions[thr]) * intensities[thr]
-    return np.bincount(seg, vals, len(a))
+    out = np.zeros(len(a))
+    # Chunks bound the temporaries (about 40 doubles per pair) to a few hundred MB.
+    for lo in range(0, len(seg), PAIR_CHUNK):
+        s, t = seg[lo:lo + PAIR_CHUNK], thr[lo:lo + PAIR_CHUNK]
+        vals = pair_integrals(a[s], b[s], positions[t]) * intensities[t]
+        out += np.bincount(s, vals, len(a))
+    return out

@@ -35,7 +35,7 @@ class OptimisationResult:
         points: Optimised path, (n+1, 3) [m].
         iterations: L-BFGS-B iterations over all penalty rounds.
         evaluations: Cost-and-gradient evaluations.
-        rounds: Stages run: 1 (L-BFGS-B) or 2 (then SLSQP for the angle limits).
+        rounds: Stages run: 1 (L-BFGS-B only), 2 or 3 (then SLSQP runs for the angle limits).
     """
 
     points: NDArray
@@ -161,12 +161,17 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
             return angle_constraints(np.vstack([ends[0], z.reshape(-1, 3), ends[1]]),
                                      pitch, turn)[1]
 
-        res = minimize(objective, x[1:-1].reshape(-1), jac=True, method='SLSQP',
-                       bounds=bounds,
-                       constraints=[{'type': 'ineq', 'fun': limits, 'jac': limits_jac}],
-                       options={'maxiter': constrained_iterations, 'ftol': tolerance})
-        iterations += int(res.nit)
-        evaluations += int(res.nfev)
-        stages = 2
-        x = np.vstack([ends[0], res.x.reshape(-1, 3), ends[1]])
+        # SLSQP usually restores feasibility within its first iterations; when a hard start
+        # needs longer, one restart from where it stopped (fresh Hessian) is cheap insurance.
+        for _ in range(2):
+            res = minimize(objective, x[1:-1].reshape(-1), jac=True, method='SLSQP',
+                           bounds=bounds,
+                           constraints=[{'type': 'ineq', 'fun': limits, 'jac': limits_jac}],
+                           options={'maxiter': constrained_iterations, 'ftol': tolerance})
+            iterations += int(res.nit)
+            evaluations += int(res.nfev)
+            stages += 1
+            x = np.vstack([ends[0], res.x.reshape(-1, 3), ends[1]])
+            if check_angles(x, max_pitch_deg, max_turn_deg).feasible:
+                break
     return OptimisationResult(x, iterations, evaluations, stages)

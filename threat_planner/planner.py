@@ -374,7 +374,7 @@ def _optimise_routes(routes: list[list[int]], network: Network, s: NDArray, t: N
     """
     w = config.w
     bounds = box if config.confine_to_box else None
-    cutoff = None if edge_j.radius is None else 2.0 * edge_j.radius
+    cutoff = None if edge_j.radius is None else 1.5 * edge_j.radius
     f_pos, f_int = threats.positions, threats.intensities
     # The straight line is the other natural start, and wins when length dominates.
     seeds = [(f'route {i}', seq) for i, seq in enumerate(routes)] + [('straight line', [])]

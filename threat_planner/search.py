@@ -24,7 +24,7 @@ from threat_planner.threats import ThreatField
 #: Exact (segment x threat) pairs evaluated before edge costs switch to the cut-off.
 DENSE_PAIR_LIMIT = 4_000_000
 #: Cut-off radius for edge threat costs, in multiples of the threats' typical spacing.
-CUTOFF_SPACINGS = 3.0
+CUTOFF_SPACINGS = 2.0
 
 
 @dataclass(frozen=True)

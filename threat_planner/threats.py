@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
+from itertools import chain
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -189,11 +190,13 @@ class ThreatField:
         """
         mid = 0.5 * (a + b)
         length = np.linalg.norm(b - a, axis=1)
-        lists = self.tree.query_ball_point(mid, radius + 0.5 * length, return_sorted=False)
-        counts = np.fromiter((len(x) for x in lists), dtype=np.int64, count=len(lists))
-        seg = np.repeat(np.arange(len(a)), counts)
-        thr = (np.fromiter((i for x in lists for i in x), dtype=np.int64, count=int(counts.sum()))
-               if counts.sum() else np.zeros(0, dtype=np.int64))
+        reach = radius + 0.5 * length
+        # Per-segment reach: a single query at the largest reach would hand long edges'
+        # neighbourhoods to every short one.
+        lists = self.tree.query_ball_point(mid, reach, return_sorted=False)
+        counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
+        seg = np.repeat(np.arange(len(a), dtype=np.int64), counts)
+        thr = np.fromiter(chain.from_iterable(lists), dtype=np.int64, count=int(counts.sum()))
         near_f = np.bincount(seg, self.intensities[thr], len(a))
         bound = np.maximum(self.total_intensity - near_f, 0.0) * length / radius ** 4
         return seg, thr, bound
