@@ -164,17 +164,19 @@ def render_markdown(data: dict) -> str:
         cells += [f"{r['wall_ms']:.1f}", f"{r['J']:.2f}", f"{r['peak_rss_mb']:.0f}",
                   f"{r['rss_growth_mb']:.0f}", f"{r['tracemalloc_peak_mb']:.1f}"]
         lines.append('| ' + ' | '.join(cells) + ' |')
-    return '\n'.join([
-        '# Scaling', '',
+    text = (
         f"`best` (w = {data['w']}), N threats uniform at random (seed {data['seed']}) in a "
-        'cube of side 100 (N/20)^(1/3) m (the 20-threat scenarios\' density), start and goal '
+        "cube of side 100 (N/20)^(1/3) m (the 20-threat scenarios' density), start and goal "
         'at opposite corners at mid height; then the shared scale1000.yaml and '
-        f"scale10000.yaml. Stage times are `PlanResult.timings_ms`, median of {data['repeats']} "
-        'run(s) (fewer, shown as runs, once they pass 10 s); wall ms is the whole `plan` call on a freshly built ThreatField (it adds '
-        'input checks and the k-d tree). Each problem runs in a fresh subprocess: peak RSS is '
-        'the process\'s high-water mark (interpreter and libraries included), RSS growth is '
-        'that over the baseline after imports and set-up, and the tracemalloc peak is the '
-        'Python-heap peak (numpy buffers included) of one more plan.', '',
+        'scale10000.yaml. Stage times are `PlanResult.timings_ms`, median of up to '
+        f"{data['repeats']} runs (fewer, see column runs, once they pass 10 s); wall ms is the "
+        'whole `plan` call on a freshly built ThreatField (it adds input checks and the k-d '
+        'tree). Each problem runs in a fresh subprocess: peak RSS is its high-water mark '
+        '(VmHWM; interpreter and libraries included), RSS growth is that over the baseline '
+        'after imports and set-up, and the tracemalloc peak is the Python-heap peak (numpy '
+        'buffers included) of one more plan.')
+    return '\n'.join([
+        '# Scaling', '', text, '',
         '\n'.join(lines), '', '![time and memory against N](scale.png)', ''])
 
 

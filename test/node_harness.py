@@ -44,7 +44,7 @@ LEVEL_NAMES = {DiagnosticStatus.OK: 'OK', DiagnosticStatus.WARN: 'WARN',
 
 
 def domain_id(offset: int, span: int = 40) -> int:
-    """A ROS domain id for this process: `offset` + pid modulo `span` (keep <= 101)."""
+    """Return a ROS domain id for this process: `offset` + pid modulo `span` (keep <= 101)."""
     return offset + os.getpid() % span
 
 
@@ -121,7 +121,7 @@ def stop_process(proc: subprocess.Popen, sig: int = signal.SIGTERM,
 
 def pose(xyz: Sequence[float], frame_id: str = 'map', stamp: Optional[Time] = None
          ) -> PoseStamped:
-    """A PoseStamped at `xyz`."""
+    """Build a PoseStamped at `xyz`."""
     msg = PoseStamped()
     msg.header.frame_id = frame_id
     if stamp is not None:
@@ -132,7 +132,7 @@ def pose(xyz: Sequence[float], frame_id: str = 'map', stamp: Optional[Time] = No
 
 
 def cloud(positions, intensities, frame_id: str = 'map', stamp: Optional[Time] = None):
-    """A PointCloud2 of the threats (float32 x, y, z, intensity)."""
+    """Build a PointCloud2 of the threats (float32 x, y, z, intensity)."""
     return pointcloud2_from_threats(positions, intensities, frame_id, stamp or Time())
 
 
@@ -159,6 +159,7 @@ class RosClient:
     def __init__(self, domain: int, name: str = 'test_client') -> None:
         # Read when the first participant of this process is created.
         set_discovery_env(os.environ)
+        self.domain = domain
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain)
         self.node = rclpy.create_node(name, context=self.context)
@@ -188,7 +189,7 @@ class RosClient:
     # -- publishing ------------------------------------------------------------------
 
     def publisher(self, topic: str, msg_type: type, qos: QoSProfile = LATCHED):
-        """A (cached) publisher."""
+        """Return a publisher, created on first use."""
         key = (topic, msg_type, id(qos))
         if key not in self._publishers:
             self._publishers[key] = self.node.create_publisher(msg_type, topic, qos)
@@ -227,7 +228,7 @@ class RosClient:
             return len(self.messages.get(topic, []))
 
     def last(self, topic: str):
-        """The latest message on `topic`, or None."""
+        """Return the latest message on `topic`, or None."""
         with self._cond:
             msgs = self.messages.get(topic, [])
             return msgs[-1][1] if msgs else None

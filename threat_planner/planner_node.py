@@ -26,7 +26,9 @@ Every accepted input (a threat picture, start, goal or parameter change) gets th
 input sequence number and triggers a replan. Planning runs in a worker thread so the
 executor keeps serving callbacks; inputs that arrive while a plan runs are coalesced into a
 single pending request holding the latest state (latest wins), and every request replaced
-that way is counted as ``inputs_skipped``. Each ``plan_info`` names the input it answers
+that way is counted as ``inputs_skipped``. ``initial_path`` and ``path`` are published as
+soon as a plan is done, ``network`` and ``plan_info`` once its markers are drawn (for 1000
+threats that takes ~0.1 s). Each ``plan_info`` names the input it answers
 (``input_seq``, ``input_source``, ``input_stamp_ns``), and every output header carries that
 input's stamp (the node clock's time of a parameter change).
 
@@ -404,6 +406,7 @@ class _Outcome:
     initial_path: Optional[Path] = None
     path: Optional[Path] = None
     network: Optional[MarkerArray] = None
+    network_error: Optional[str] = None
     error: Optional[str] = None
     queue_ms: float = 0.0
     plan_ms: float = 0.0
@@ -446,7 +449,7 @@ class ThreatPlannerNode(Node):
         self._plans = 0
         self._staged: Optional[tuple[NodeSettings, Optional[McapRecorder]]] = None
         self._recorder: Optional[McapRecorder] = None
-        self._outcomes: collections.deque[_Outcome] = collections.deque()
+        self._outcomes: collections.deque[tuple[str, _Outcome]] = collections.deque()
         self._outcome_lock = threading.Lock()
         self._closed = False
 
@@ -490,7 +493,7 @@ class ThreatPlannerNode(Node):
             settings = settings_from_parameters(self._parameter_values(params))
             start = settings.start if 'start' in names else self._start
             goal = settings.goal if 'goal' in names else self._goal
-            check_endpoints(start, goal, settings.box, self._threats or _NO_THREATS)
+            check_endpoints(start, goal, settings.box, self._known_threats)
             recorder = None
             if 'record' in names and settings.record and (
                     settings.record != self._settings.record or self._recorder is None):
@@ -509,7 +512,6 @@ class ThreatPlannerNode(Node):
         settings, recorder = self._staged
         self._staged = None
         names = {p.name for p in params}
-        old = self._settings
         self._settings = settings
         if 'record' in names and (recorder is not None or not settings.record):
             self._close_recorder()
@@ -523,25 +525,29 @@ class ThreatPlannerNode(Node):
         self._received += 1
         changed = ', '.join(f'{p.name}={p.value!r}' for p in params)
         self.get_logger().info(f'input #{self._seq} (parameters): {changed}')
-        if names & _PLANNING_PARAMETERS or old.frame_id != settings.frame_id:
+        if names & _PLANNING_PARAMETERS:
             self._request_plan('parameters', self.get_clock().now().to_msg())
 
     # -- recording -------------------------------------------------------------------
 
     def _open_recorder(self, target: str) -> McapRecorder:
         recorder = McapRecorder(target, prefix=NODE_NAME)
-        subs = (self._sub_threats, self._sub_poses, self._sub_start, self._sub_goal)
-        for sub in subs:
-            recorder.add_topic(sub.topic_name, _type_name(sub.msg_type), sub.qos_profile)
-        for pub in (self._pub_initial, self._pub_path, self._pub_network, self._pub_info):
-            recorder.add_topic(pub.topic_name, _type_name(pub.msg_type), pub.qos_profile)
-        recorder.add_topic(PARAMETER_EVENTS_TOPIC, 'rcl_interfaces/msg/ParameterEvent',
-                           PARAMETER_EVENTS_QOS)
-        # The full parameter set first, so the recording alone says how the node was set.
-        event = self._parameter_event()
-        event.new_parameters = [self.get_parameter(n).to_parameter_msg()
-                                for n in PARAMETER_DEFAULTS]
-        recorder.write(PARAMETER_EVENTS_TOPIC, event, log_time_ns=self._now_ns())
+        try:
+            subs = (self._sub_threats, self._sub_poses, self._sub_start, self._sub_goal)
+            pubs = (self._pub_initial, self._pub_path, self._pub_network, self._pub_info)
+            for endpoint in subs + pubs:
+                recorder.add_topic(endpoint.topic_name, _type_name(endpoint.msg_type),
+                                   endpoint.qos_profile)
+            recorder.add_topic(PARAMETER_EVENTS_TOPIC, 'rcl_interfaces/msg/ParameterEvent',
+                               PARAMETER_EVENTS_QOS)
+            # The full parameter set first, so the recording alone says how the node was set.
+            event = self._parameter_event()
+            event.new_parameters = [self.get_parameter(n).to_parameter_msg()
+                                    for n in PARAMETER_DEFAULTS]
+            recorder.write(PARAMETER_EVENTS_TOPIC, event, log_time_ns=self._now_ns())
+        except RecordingError:
+            recorder.close()
+            raise
         self.get_logger().info(f'recording inputs and outputs to {recorder.path}')
         return recorder
 
@@ -604,6 +610,10 @@ class ThreatPlannerNode(Node):
             self._set_threats(positions, intensities)
         self._receive(self._sub_poses.topic_name, msg, apply)
 
+    @property
+    def _known_threats(self) -> ThreatField:
+        return _NO_THREATS if self._threats is None else self._threats
+
     def _set_threats(self, positions: NDArray, intensities: NDArray) -> None:
         field = ThreatField.from_arrays(positions, intensities)
         check_endpoints(self._start, self._goal, self._settings.box, field)
@@ -613,7 +623,7 @@ class ThreatPlannerNode(Node):
         def apply() -> None:
             start = point_from_pose_stamped(msg, self._settings.frame_id, 'start')
             check_endpoints(start, self._goal, self._settings.box,
-                            self._threats or _NO_THREATS)
+                            self._known_threats)
             self._start = start
         self._receive(self._sub_start.topic_name, msg, apply)
 
@@ -621,7 +631,7 @@ class ThreatPlannerNode(Node):
         def apply() -> None:
             goal = point_from_pose_stamped(msg, self._settings.frame_id, 'goal_pose')
             check_endpoints(self._start, goal, self._settings.box,
-                            self._threats or _NO_THREATS)
+                            self._known_threats)
             self._goal = goal
         self._receive(self._sub_goal.topic_name, msg, apply)
 
@@ -634,6 +644,9 @@ class ThreatPlannerNode(Node):
             apply()
         except InputError as exc:
             self._reject(topic, msg.header.stamp, str(exc))
+            return
+        except Exception as exc:  # noqa: B902 - no message may stop the node
+            self._reject(topic, msg.header.stamp, f'cannot read: {type(exc).__name__}: {exc}')
             return
         self._request_plan(topic, msg.header.stamp)
 
@@ -662,14 +675,25 @@ class ThreatPlannerNode(Node):
         outcome = _Outcome(request)
         t0 = time.perf_counter()
         outcome.queue_ms = max(0.0, 1e-6 * (self._now_ns() - request.received_ns))
+        s = request.settings
         try:
-            s = request.settings
             result = plan(request.threats, request.start, request.goal, s.box, s.config)
             t1 = time.perf_counter()
             outcome.plan_ms = 1e3 * (t1 - t0)
             outcome.result = result
             outcome.initial_path = path_to_msg(result.initial_path, s.frame_id, request.stamp)
             outcome.path = path_to_msg(result.path, s.frame_id, request.stamp)
+        except (InputError, PlanningError) as exc:
+            outcome.error = str(exc)
+        except Exception as exc:  # noqa: B902 - a planner bug must not kill the worker
+            outcome.error = f'planner failed: {type(exc).__name__}: {exc}'
+        if outcome.error is not None:
+            self._hand_over('error', outcome)
+            return
+        # The paths go out before the markers are built: for 1000 threats the MarkerArray
+        # takes ~0.1 s, which a path follower should not wait for.
+        self._hand_over('paths', outcome)
+        try:
             scale = s.box.diagonal / math.sqrt(3.0) / 100.0
             net = result.network
             outcome.network = network_markers(
@@ -678,13 +702,15 @@ class ThreatPlannerNode(Node):
                 network_edges=net.edges, initial_path=result.initial_path,
                 path=result.path, frame_id=s.frame_id, stamp=request.stamp,
                 threat_diameter=4.0 * scale, node_diameter=scale, line_width=0.2 * scale)
-            outcome.messages_ms = 1e3 * (time.perf_counter() - t1)
-        except (InputError, PlanningError) as exc:
-            outcome.error = str(exc)
-        except Exception as exc:  # noqa: B902 - a planner bug must not kill the worker
-            outcome.error = f'planner failed: {type(exc).__name__}: {exc}'
+        except Exception as exc:  # noqa: B902 - a drawing bug must not lose the plan
+            outcome.network_error = f'{type(exc).__name__}: {exc}'
+        outcome.messages_ms = 1e3 * (time.perf_counter() - t1)
+        self._hand_over('done', outcome)
+
+    def _hand_over(self, phase: str, outcome: _Outcome) -> None:
+        """Queue a phase of a plan for the executor thread and wake it."""
         with self._outcome_lock:
-            self._outcomes.append(outcome)
+            self._outcomes.append((phase, outcome))
         try:
             self._guard.trigger()
         except Exception:  # noqa: B902 - the node may be torn down while a plan ran
@@ -713,20 +739,27 @@ class ThreatPlannerNode(Node):
             with self._outcome_lock:
                 if not self._outcomes or self._closed:
                     return
-                outcome = self._outcomes.popleft()
-            self._publish_outcome(outcome)
+                phase, outcome = self._outcomes.popleft()
+            if phase == 'paths':
+                self._publish(self._pub_initial, outcome.initial_path)
+                self._publish(self._pub_path, outcome.path)
+            elif phase == 'done':
+                self._publish_plan_done(outcome)
+            else:
+                self._publish_plan_error(outcome)
 
-    def _publish_outcome(self, outcome: _Outcome) -> None:
+    def _publish_plan_error(self, outcome: _Outcome) -> None:
         req = outcome.request
-        if outcome.error is not None:
-            message = f'plan for input #{req.seq} ({req.source}) failed: {outcome.error}'
-            self.get_logger().error(message)
-            values = self._input_values(req.seq, req.source, req.stamp)
-            values['error'] = outcome.error
-            self._publish(self._pub_info, plan_info_msg('ERROR', message, values, req.stamp))
-            return
-        self._plans += 1
+        message = f'plan for input #{req.seq} ({req.source}) failed: {outcome.error}'
+        self.get_logger().error(message)
+        values = self._input_values(req.seq, req.source, req.stamp)
+        values['error'] = outcome.error
+        self._publish(self._pub_info, plan_info_msg('ERROR', message, values, req.stamp))
+
+    def _publish_plan_done(self, outcome: _Outcome) -> None:
+        req = outcome.request
         result = outcome.result
+        self._plans += 1
         values = self._input_values(req.seq, req.source, req.stamp)
         values.update(_result_values(result, len(req.threats)))
         values['queue_ms'] = outcome.queue_ms
@@ -736,9 +769,12 @@ class ThreatPlannerNode(Node):
         message = (f'plan for input #{req.seq} ({req.source}): J={result.cost.J:.6g} '
                    f'through {len(req.threats)} threats in {outcome.plan_ms:.0f} ms'
                    + ('' if result.feasible else '; violates the pitch or turn limit'))
-        self._publish(self._pub_initial, outcome.initial_path)
-        self._publish(self._pub_path, outcome.path)
-        self._publish(self._pub_network, outcome.network)
+        if outcome.network is not None:
+            self._publish(self._pub_network, outcome.network)
+        else:
+            values['network_error'] = outcome.network_error
+            self.get_logger().warning(f'input #{req.seq}: network markers not drawn: '
+                                      f'{outcome.network_error}')
         self._publish(self._pub_info, plan_info_msg(status, message, values, req.stamp))
         self.get_logger().info(message)
 

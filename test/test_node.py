@@ -1,0 +1,700 @@
+"""Tests of the planner node and the threat publisher over the real ROS 2 middleware.
+
+Each node runs as its own process (``python -m threat_planner.planner_node``) in a
+namespace of this module's ROS domain; this process talks to them through its own rclpy
+context (see node_harness.py). Planner settings are fast ('paper') wherever the result
+itself is not under test; the comparison with the library uses the default 'best'.
+"""
+
+import math
+import py_compile
+import signal
+import threading
+import time
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped
+from nav_msgs.msg import Path as PathMsg
+import numpy as np
+import pytest
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import PointCloud2, PointField
+from visualization_msgs.msg import MarkerArray
+import yaml
+
+from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON, REPO,
+                          RosClient, start_process, stop_process, VOLATILE)
+from threat_planner.conversions import (path_from_msg, stamp_to_ns,
+                                        threats_from_pointcloud2)
+from threat_planner.errors import InputError
+from threat_planner.planner import plan, PlannerConfig
+from threat_planner.planner_node import (PARAMETER_DEFAULTS, PlanWorker,
+                                         settings_from_parameters)
+from threat_planner.recording import read_messages
+from threat_planner.scenario import load_scenario
+from threat_planner.threat_publisher import ThreatDrift
+from threat_planner.threats import ThreatField
+
+DOMAIN = domain_id(1)
+SCENARIO_FILE = REPO / 'test' / 'data' / 'uniform20_0.yaml'
+SCENARIO = load_scenario(SCENARIO_FILE)
+CONFIG_FILE = REPO / 'config' / 'planner.yaml'
+FAST_MAX_THREATS = 50
+# A flood publisher keeps every sample until delivered, so the node sees them all.
+DEEP_LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                          history=HistoryPolicy.KEEP_LAST, depth=100)
+
+
+def yaml_parameters():
+    return yaml.safe_load(CONFIG_FILE.read_text())['threat_planner']['ros__parameters']
+
+
+# ------------------------------------------------------------------- fixtures
+
+
+@pytest.fixture(scope='module')
+def client():
+    c = RosClient(DOMAIN, 'test_node_client')
+    yield c
+    c.close()
+
+
+class PlannerProcess:
+    """A planner node process and the client topics that go with its namespace."""
+
+    def __init__(self, client, ns, params, log_path):
+        self.client = client
+        self.ns = ns
+        self.log_path = log_path
+        self.proc = start_process(planner_command(ns, params), DOMAIN, log_path)
+        for name, msg_type in (('path', PathMsg), ('initial_path', PathMsg),
+                               ('plan_info', DiagnosticArray), ('network', MarkerArray)):
+            client.subscribe(self.topic(name), msg_type)
+        self.threats = client.publisher(self.topic('threats'), PointCloud2)
+        self.poses = client.publisher(self.topic('threat_poses'), PoseArray)
+        self.start = client.publisher(self.topic('start'), PoseStamped, VOLATILE)
+        self.goal = client.publisher(self.topic('goal_pose'), PoseStamped, VOLATILE)
+        for pub in (self.threats, self.poses, self.start, self.goal):
+            client.wait_matched(pub, timeout=30.0)
+
+    def topic(self, name):
+        return f'{self.ns}/{name}'
+
+    @property
+    def node_name(self):
+        return f'{self.ns}/threat_planner'
+
+    def infos(self):
+        return [info(m) for _, m in list(self.client.messages[self.topic('plan_info')])]
+
+    def last_seq(self):
+        infos = self.infos()
+        return int(infos[-1]['input_seq']) if infos else 0
+
+    def wait_info(self, pred=lambda i: True, after_seq=None, timeout=30.0):
+        """The first plan_info after input `after_seq` for which `pred` holds."""
+        after_seq = self.last_seq() if after_seq is None else after_seq
+        msg = self.client.wait_for(
+            self.topic('plan_info'),
+            lambda m: int(info(m)['input_seq']) > after_seq and pred(info(m)), timeout)
+        return info(msg)
+
+    def wait_plan(self, after_seq=None, timeout=60.0, pred=lambda i: True):
+        """The next successful plan's info, path and initial path (matched by stamp)."""
+        i = self.wait_info(lambda i: i['level'] != 'ERROR' and pred(i), after_seq, timeout)
+        stamp = int(i['input_stamp_ns'])
+        path = self.client.wait_for(self.topic('path'),
+                                    lambda m: stamp_to_ns(m.header.stamp) == stamp, 10.0)
+        initial = self.client.wait_for(self.topic('initial_path'),
+                                       lambda m: stamp_to_ns(m.header.stamp) == stamp, 10.0)
+        return i, path, initial
+
+    def alive(self):
+        return self.proc.poll() is None
+
+    def log(self):
+        return self.log_path.read_text(errors='replace')
+
+    def stop(self, sig=signal.SIGTERM):
+        return stop_process(self.proc, sig)
+
+
+def scenario_params(scenario=SCENARIO):
+    box = scenario.box
+    return {'bounds': box.lo.tolist() + box.hi.tolist(), 'start': scenario.start.tolist(),
+            'goal': scenario.goal.tolist()}
+
+
+@pytest.fixture(scope='module')
+def best_node(client, tmp_path_factory):
+    """Default ('best') settings from config/planner.yaml, start and goal of the scenario."""
+    node = PlannerProcess(client, '/best', scenario_params(),
+                          tmp_path_factory.mktemp('best') / 'node.log')
+    yield node
+    assert node.stop(signal.SIGINT) == 0, node.log()
+
+
+@pytest.fixture(scope='module')
+def fast_node(client, tmp_path_factory):
+    """'paper' settings, a small max_threats, default start and goal ([0,0,50], [100,100,50])."""
+    node = PlannerProcess(client, '/fast', {'method': 'paper', 'max_threats': FAST_MAX_THREATS},
+                          tmp_path_factory.mktemp('fast') / 'node.log')
+    yield node
+    assert node.stop() == 0, node.log()
+
+
+def expected_plan(msg, start, goal, params):
+    """What the library plans for the same (float32-rounded) cloud and parameters."""
+    positions, intensities = threats_from_pointcloud2(msg, 'map')
+    settings = settings_from_parameters(params)
+    return plan(ThreatField.from_arrays(positions, intensities), start, goal, settings.box,
+                settings.config)
+
+
+def node_parameters(**changes):
+    params = dict(yaml_parameters())
+    params.update(changes)
+    return params
+
+
+def run_in_thread(fn, *args):
+    """Run fn in a thread (numpy releases the GIL) and return a getter for its result."""
+    box = {}
+    thread = threading.Thread(target=lambda: box.update(result=fn(*args)))
+    thread.start()
+
+    def get():
+        thread.join()
+        return box['result']
+    return get
+
+
+# ------------------------------------------------------------ pure helpers
+
+
+def test_config_file_holds_the_node_defaults():
+    assert yaml_parameters() == PARAMETER_DEFAULTS
+    defaults = PlannerConfig()
+    for name in ('w', 'method', 'k', 'auto_k', 'damping', 'mass', 'q', 'n_points',
+                 'max_pitch_deg', 'max_turn_deg', 'entry_candidates', 'confine_to_box'):
+        assert PARAMETER_DEFAULTS[name] == getattr(defaults, name), name
+
+
+@pytest.mark.parametrize('change, reason', [
+    ({'w': 0.0}, 'w: must satisfy 0 < w < 1'),
+    ({'method': 'fastest'}, 'method: must be one of'),
+    ({'bounds': [0.0, 0.0, 0.0, 1.0, 1.0]}, 'bounds: expected 6 numbers'),
+    ({'bounds': [0.0, 0.0, 0.0, 1.0, -1.0, 1.0]}, 'bounds: max.y must exceed min.y'),
+    ({'start': [0.0, math.nan, 0.0]}, 'start: not finite'),
+    ({'goal': [1.0, 2.0]}, 'goal: expected [x, y, z], got 2 values'),
+    ({'frame_id': ''}, 'frame_id: must be a non-empty string'),
+    ({'default_intensity': 0.0}, 'default_intensity: must be finite and > 0'),
+    ({'max_threats': -1}, 'max_threats: must be an integer >= 0'),
+])
+def test_settings_refuse_bad_values(change, reason):
+    with pytest.raises(InputError, match=reason.replace('[', r'\[').replace(']', r'\]')):
+        settings_from_parameters({**PARAMETER_DEFAULTS, **change})
+
+
+def test_settings_accept_integer_arrays():
+    s = settings_from_parameters({**PARAMETER_DEFAULTS, 'bounds': [0, 0, 0, 10, 10, 10]})
+    assert s.box.hi.tolist() == [10.0, 10.0, 10.0]
+
+
+def test_plan_worker_runs_one_job_and_keeps_one_pending():
+    release = threading.Event()
+    started, done = [], []
+
+    def run(job):
+        started.append(job)
+        if job == 0:
+            release.wait(5.0)
+        done.append(job)
+
+    worker = PlanWorker(run)
+    assert worker.submit(0) is False
+    deadline = time.monotonic() + 5.0
+    while not worker.busy and time.monotonic() < deadline:
+        time.sleep(0.001)
+    skipped = [worker.submit(j) for j in range(1, 6)]
+    assert skipped == [False, True, True, True, True]
+    assert started == [0] and worker.has_pending
+    release.set()
+    while len(done) < 2 and time.monotonic() < deadline:
+        time.sleep(0.001)
+    assert done == [0, 5]
+    assert worker.stop()
+
+
+def test_threat_drift_is_deterministic_and_stays_in_bounds():
+    lo, hi = SCENARIO.box.lo, SCENARIO.box.hi
+    p0 = SCENARIO.threats.positions
+    for mode in ('random_walk', 'sinusoid'):
+        a = ThreatDrift(p0, lo, hi, 5.0, mode, seed=3)
+        b = ThreatDrift(p0, lo, hi, 5.0, mode, seed=3)
+        for tick in range(1, 40):
+            pa, pb = a.at(tick * 0.5, 0.5), b.at(tick * 0.5, 0.5)
+            np.testing.assert_array_equal(pa, pb)
+            assert np.all(pa >= lo) and np.all(pa <= hi)
+        assert np.max(np.linalg.norm(pa - p0, axis=1)) > 1.0
+    still = ThreatDrift(p0, lo, hi, 0.0)
+    np.testing.assert_array_equal(still.at(10.0, 1.0), p0)
+
+
+def test_launch_file_compiles(tmp_path):
+    py_compile.compile(str(REPO / 'launch' / 'planner.launch.py'),
+                       cfile=str(tmp_path / 'planner.launch.pyc'), doraise=True)
+    try:
+        import launch_ros  # noqa: F401
+    except ImportError:
+        pytest.skip('launch_ros is not installed: only compiled')
+    import importlib.util
+    spec = importlib.util.spec_from_file_location('planner_launch',
+                                                  REPO / 'launch' / 'planner.launch.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.generate_launch_description().entities
+
+
+# ------------------------------------------------------ planning with 'best'
+
+
+def test_plan_matches_library(best_node):
+    msg = cloud(SCENARIO.threats.positions, SCENARIO.threats.intensities,
+                stamp=Time(sec=3, nanosec=5))
+    expected = run_in_thread(expected_plan, msg, SCENARIO.start, SCENARIO.goal,
+                             node_parameters(**scenario_params()))
+    best_node.threats.publish(msg)
+    i, path, initial = best_node.wait_plan(after_seq=0)
+    result = expected()
+
+    assert i['input_seq'] == '1' and i['input_source'] == '/best/threats'
+    assert int(i['input_stamp_ns']) == 3_000_000_005
+    assert i['method'] == 'best' and i['threats'] == '20'
+    np.testing.assert_allclose(path_from_msg(initial), result.initial_path, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(path_from_msg(path), result.path, rtol=0, atol=1e-6)
+    assert float(i['J']) == pytest.approx(result.cost.J, rel=1e-9)
+    assert float(i['initial_J']) == pytest.approx(result.initial_cost.J, rel=1e-9)
+    for key in ('J_L', 'J_R', 'initial_J_L', 'initial_J_R', 'nodes', 'edges', 'entry', 'exit',
+                'k', 'feasible', 'partition_ms', 'search_ms', 'total_ms', 'inputs_skipped'):
+        assert key in i, key
+    assert int(i['nodes']) == result.network.n_nodes
+    assert i['feasible'] == str(result.feasible)
+    assert i['level'] == ('OK' if result.feasible else 'WARN')
+    for m in (path, initial):
+        assert m.header.frame_id == 'map' and m.header.stamp == Time(sec=3, nanosec=5)
+    net = best_node.client.wait_for(best_node.topic('network'),
+                                    lambda m: m.markers[0].header.stamp == msg.header.stamp)
+    assert {m.ns for m in net.markers} >= {'threats', 'nodes', 'network', 'path'}
+
+
+def test_late_subscriber_gets_latched_plan(best_node):
+    client = best_node.client
+    last = client.last(best_node.topic('path'))
+    late = RosClient(DOMAIN, 'late_subscriber')
+    try:
+        for name, msg_type in (('path', PathMsg), ('initial_path', PathMsg),
+                               ('plan_info', DiagnosticArray), ('network', MarkerArray)):
+            late.subscribe(best_node.topic(name), msg_type)
+            late.wait_for(best_node.topic(name), timeout=10.0)
+        got = late.messages[best_node.topic('path')]
+        assert len(got) == 1
+        assert got[0][1].header.stamp == last.header.stamp
+        np.testing.assert_array_equal(path_from_msg(got[0][1]), path_from_msg(last))
+    finally:
+        late.close()
+
+
+# --------------------------------------------------------- the fast node
+
+
+def baseline(fast_node):
+    """Publish the scenario's threats to the fast node and return its plan."""
+    seq = fast_node.last_seq()
+    fast_node.threats.publish(cloud(SCENARIO.threats.positions, SCENARIO.threats.intensities,
+                                    stamp=Time(sec=10)))
+    return fast_node.wait_plan(after_seq=seq)
+
+
+def test_start_and_goal_messages_replan(fast_node):
+    baseline(fast_node)
+    for sec, pub, xyz, end in ((11, fast_node.start, [5.0, 10.0, 40.0], 0),
+                               (12, fast_node.goal, [90.0, 95.0, 60.0], -1)):
+        seq = fast_node.last_seq()
+        pub.publish(pose(xyz, stamp=Time(sec=sec)))
+        i, path, initial = fast_node.wait_plan(after_seq=seq)
+        assert i['input_source'].endswith(('/start', '/goal_pose'))
+        np.testing.assert_allclose(path_from_msg(path)[end], xyz, atol=1e-9)
+        np.testing.assert_allclose(path_from_msg(initial)[end], xyz, atol=1e-9)
+    # Back to the defaults for the tests that follow.
+    for sec, pub, xyz in ((13, fast_node.start, [0.0, 0.0, 50.0]),
+                          (14, fast_node.goal, [100.0, 100.0, 50.0])):
+        seq = fast_node.last_seq()
+        pub.publish(pose(xyz, stamp=Time(sec=sec)))
+        fast_node.wait_plan(after_seq=seq)
+
+
+def test_replans_after_threat_update(fast_node):
+    _, before, _ = baseline(fast_node)
+    moved = SCENARIO.threats.positions + np.array([3.0, -2.0, 1.5])
+    msg = cloud(moved, SCENARIO.threats.intensities, stamp=Time(sec=15))
+    seq = fast_node.last_seq()
+    fast_node.threats.publish(msg)
+    i, path, _ = fast_node.wait_plan(after_seq=seq)
+    assert int(i['input_seq']) == seq + 1 and path.header.stamp == Time(sec=15)
+    assert not np.allclose(path_from_msg(path), path_from_msg(before))
+    expected = expected_plan(msg, [0.0, 0.0, 50.0], [100.0, 100.0, 50.0],
+                             node_parameters(method='paper'))
+    np.testing.assert_allclose(path_from_msg(path), expected.path, rtol=0, atol=1e-6)
+
+
+def test_parameter_change_replans_and_bad_values_are_refused(fast_node):
+    client = fast_node.client
+    seq = fast_node.last_seq()
+    results = client.set_parameters(fast_node.node_name, {'w': 0.8})
+    assert results[0].successful, results[0].reason
+    i, path, _ = fast_node.wait_plan(after_seq=seq)
+    assert i['input_source'] == 'parameters' and i['w'] == '0.8'
+    assert int(i['input_seq']) == seq + 1
+
+    refused = {
+        'w': (0.0, 'w: must satisfy 0 < w < 1, got 0.0'),
+        'method': ('fastest', 'method: must be one of paper, improved, best'),
+        'bounds': ([0.0, 0.0, 0.0, 100.0, 100.0], 'bounds: expected 6 numbers'),
+        'n_points': (1, 'out of range'),
+        'start': ([0.0, 0.0, 150.0], 'start: [0.0, 0.0, 150.0] is outside bounds'),
+        'frame_id': ('', 'frame_id: must be a non-empty string'),
+    }
+    count = client.count(fast_node.topic('plan_info'))
+    for name, (value, reason) in refused.items():
+        result = client.set_parameters(fast_node.node_name, {name: value})[0]
+        assert not result.successful, name
+        assert reason in result.reason, (name, result.reason)
+    # Shrinking the box so that it no longer holds the goal is refused as a whole.
+    result = client.set_parameters(fast_node.node_name, {
+        'bounds': [0.0, 0.0, 0.0, 50.0, 50.0, 100.0]}, atomically=True)[0]
+    assert not result.successful and 'goal:' in result.reason
+    time.sleep(0.3)
+    assert client.count(fast_node.topic('plan_info')) == count, 'a refused change replanned'
+    assert fast_node.alive()
+    seq = fast_node.last_seq()
+    assert client.set_parameters(fast_node.node_name, {'w': 0.5})[0].successful
+    fast_node.wait_plan(after_seq=seq)
+
+
+def raw_cloud(positions, intensities, *, fields=None, point_step=16, frame='map', trim=0):
+    """A hand-made float32 cloud with a chosen field list, point_step or cut-off data."""
+    n = len(positions)
+    data = np.zeros((n, point_step), np.uint8)
+    values = np.column_stack([positions, intensities]).astype('<f4')
+    width = min(point_step, 16)
+    data[:, :width] = values.view(np.uint8).reshape(n, 16)[:, :width]
+    msg = PointCloud2()
+    msg.header.frame_id = frame
+    msg.height, msg.width = 1, n
+    msg.fields = fields if fields is not None else [
+        PointField(name=name, offset=4 * k, datatype=PointField.FLOAT32, count=1)
+        for k, name in enumerate(('x', 'y', 'z', 'intensity'))]
+    msg.point_step = point_step
+    msg.row_step = point_step * n
+    msg.data = data.tobytes()[:len(data.tobytes()) - trim]
+    msg.is_dense = True
+    return msg
+
+
+def _pos(**edit):
+    p = SCENARIO.threats.positions.copy()
+    for key, value in edit.items():
+        row, col = int(key[1:].split('_')[0]), 'xyz'.index(key[-1])
+        p[row, col] = value
+    return p
+
+
+def _inten(**edit):
+    f = SCENARIO.threats.intensities.copy()
+    for key, value in edit.items():
+        f[int(key[1:])] = value
+    return f
+
+
+def _pose_array(positions, frame='map'):
+    msg = PoseArray()
+    msg.header.frame_id = frame
+    msg.poses = [Pose() for _ in positions]
+    for p, (x, y, z) in zip(msg.poses, np.asarray(positions).tolist()):
+        p.position.x, p.position.y, p.position.z = x, y, z
+    return msg
+
+
+THREAT0 = np.float32(SCENARIO.threats.positions[0]).astype(float).tolist()
+WRONG_TYPE_FIELDS = [PointField(name='x', offset=0, datatype=PointField.INT32, count=1)] + [
+    PointField(name=n, offset=4 * k, datatype=PointField.FLOAT32, count=1)
+    for k, n in enumerate(('y', 'z', 'intensity'), 1)]
+NO_INTENSITY_FIELDS = [PointField(name=n, offset=4 * k, datatype=PointField.FLOAT32, count=1)
+                       for k, n in enumerate(('x', 'y', 'z'))]
+
+BAD_INPUTS = {
+    'cloud_nan_position': ('threats', lambda: cloud(_pos(p3_x=math.nan), _inten()),
+                           'non-finite positions'),
+    'cloud_inf_position': ('threats', lambda: cloud(_pos(p0_z=math.inf), _inten()),
+                           'non-finite positions'),
+    'cloud_nan_intensity': ('threats', lambda: cloud(_pos(), _inten(f2=math.nan)),
+                            'non-finite intensities'),
+    'cloud_zero_intensity': ('threats', lambda: cloud(_pos(), _inten(f5=0.0)),
+                             'non-positive intensities'),
+    'cloud_negative_intensity': ('threats', lambda: cloud(_pos(), _inten(f7=-3.0)),
+                                 'non-positive intensities'),
+    'cloud_too_many_threats': (
+        'threats', lambda: cloud(np.tile(_pos(), (3, 1)) + 0.01 * np.arange(60)[:, None],
+                                 np.tile(_inten(), 3)),
+        f'60 threats, more than max_threats={FAST_MAX_THREATS}'),
+    'cloud_without_intensity': (
+        'threats', lambda: raw_cloud(_pos(), _inten(), fields=NO_INTENSITY_FIELDS,
+                                     point_step=12),
+        "missing field(s) ['intensity']"),
+    'cloud_wrong_field_type': ('threats', lambda: raw_cloud(_pos(), _inten(),
+                                                            fields=WRONG_TYPE_FIELDS),
+                               "field 'x' has datatype INT32"),
+    'cloud_wrong_point_step': ('threats', lambda: raw_cloud(_pos(), _inten(), point_step=12),
+                               'point_step 12 is smaller than the 16 bytes'),
+    'cloud_truncated_data': ('threats', lambda: raw_cloud(_pos(), _inten(), trim=5),
+                             'data has 315 bytes'),
+    'cloud_wrong_frame': ('threats', lambda: cloud(_pos(), _inten(), frame_id='odom'),
+                          "frame_id 'odom' does not match expected frame 'map'"),
+    'cloud_threat_on_start': ('threats', lambda: cloud(_pos(p4_x=0.0, p4_y=0.0, p4_z=50.0),
+                                                       _inten()),
+                              'start: [0.0, 0.0, 50.0] is on threat 4'),
+    'poses_nan_position': ('threat_poses', lambda: _pose_array(_pos(p1_y=math.nan)),
+                           'non-finite positions'),
+    'poses_too_many_threats': ('threat_poses', lambda: _pose_array(np.zeros((51, 3)) + 1.0),
+                               f'51 threats, more than max_threats={FAST_MAX_THREATS}'),
+    'poses_wrong_frame': ('threat_poses', lambda: _pose_array(_pos(), frame='base_link'),
+                          "frame_id 'base_link' does not match"),
+    'start_outside_bounds': ('start', lambda: pose([-1.0, 50.0, 50.0]),
+                             'start: [-1.0, 50.0, 50.0] is outside bounds'),
+    'goal_outside_bounds': ('goal_pose', lambda: pose([50.0, 50.0, 101.0]),
+                            'goal: [50.0, 50.0, 101.0] is outside bounds'),
+    'start_on_threat': ('start', lambda: pose(THREAT0), 'start: %s is on threat 0' % THREAT0),
+    'goal_on_threat': ('goal_pose', lambda: pose(THREAT0), 'goal: %s is on threat 0' % THREAT0),
+    'start_nan': ('start', lambda: pose([math.nan, 1.0, 1.0]), 'start position must be finite'),
+    'goal_inf': ('goal_pose', lambda: pose([1.0, math.inf, 1.0]),
+                 'goal_pose position must be finite'),
+    'start_wrong_frame': ('start', lambda: pose([1.0, 1.0, 1.0], frame_id='odom'),
+                          "start frame_id 'odom' does not match"),
+    'goal_wrong_frame': ('goal_pose', lambda: pose([1.0, 1.0, 1.0], frame_id='odom'),
+                         "goal_pose frame_id 'odom' does not match"),
+}
+
+
+@pytest.fixture(scope='module')
+def good_plan(fast_node):
+    return baseline(fast_node)
+
+
+@pytest.mark.parametrize('case', list(BAD_INPUTS))
+def test_bad_input_is_refused_and_last_plan_kept(fast_node, good_plan, case):
+    topic, make, reason = BAD_INPUTS[case]
+    client = fast_node.client
+    good_info, good_path, _ = good_plan
+    paths_before = client.count(fast_node.topic('path'))
+    seq = fast_node.last_seq()
+    pub = {'threats': fast_node.threats, 'threat_poses': fast_node.poses,
+           'start': fast_node.start, 'goal_pose': fast_node.goal}[topic]
+    msg = make()
+    msg.header.stamp = Time(sec=100, nanosec=len(case))
+    pub.publish(msg)
+
+    i = fast_node.wait_info(after_seq=seq, timeout=10.0)
+    assert i['level'] == 'ERROR', i
+    assert reason in i['error'], (reason, i['error'])
+    assert reason in i['message'] and fast_node.topic(topic) in i['message']
+    assert int(i['input_seq']) == seq + 1
+    assert int(i['input_stamp_ns']) == 100_000_000_000 + len(case)
+    assert fast_node.alive()
+    # The error goes to the log once, at ERROR.
+    deadline = time.monotonic() + 5.0
+    while f'input #{seq + 1} ' not in fast_node.log() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    lines = [ln for ln in fast_node.log().splitlines() if f'input #{seq + 1} ' in ln]
+    assert len(lines) == 1 and '[ERROR]' in lines[0] and reason in lines[0], lines
+    # No new plan; the latched plan is still the last good one.
+    assert client.count(fast_node.topic('path')) == paths_before
+    latched = client.last(fast_node.topic('path'))
+    assert latched.header.stamp == good_path.header.stamp
+    np.testing.assert_array_equal(path_from_msg(latched), path_from_msg(good_path))
+
+
+def test_last_good_plan_still_latched_after_bad_inputs(fast_node, good_plan):
+    _, good_path, good_initial = good_plan
+    late = RosClient(DOMAIN, 'late_after_errors')
+    try:
+        for name in ('path', 'initial_path'):
+            late.subscribe(fast_node.topic(name), PathMsg)
+        path = late.wait_for(fast_node.topic('path'), timeout=10.0)
+        initial = late.wait_for(fast_node.topic('initial_path'), timeout=10.0)
+    finally:
+        late.close()
+    assert path.header.stamp == good_path.header.stamp
+    np.testing.assert_array_equal(path_from_msg(path), path_from_msg(good_path))
+    np.testing.assert_array_equal(path_from_msg(initial), path_from_msg(good_initial))
+    assert fast_node.alive()
+
+
+@pytest.mark.parametrize('name, positions', [
+    ('none', np.zeros((0, 3))),
+    ('one', np.array([[50.0, 40.0, 60.0]])),
+    ('three', np.array([[30.0, 40.0, 60.0], [60.0, 50.0, 40.0], [50.0, 70.0, 30.0]])),
+    ('duplicates', np.array([[50.0, 40.0, 60.0]] * 6)),
+    ('coplanar', np.array([[10.0, 80.0, 35.0], [30.0, 20.0, 35.0], [50.0, 60.0, 35.0],
+                           [70.0, 10.0, 35.0], [90.0, 70.0, 35.0], [20.0, 50.0, 35.0],
+                           [60.0, 90.0, 35.0], [80.0, 40.0, 35.0]])),
+])
+def test_degenerate_pictures_are_planned(fast_node, name, positions):
+    seq = fast_node.last_seq()
+    fast_node.threats.publish(cloud(positions, np.full(len(positions), 1.0e5),
+                                    stamp=Time(sec=200)))
+    i, path, _ = fast_node.wait_plan(after_seq=seq)
+    assert int(i['input_seq']) == seq + 1, i
+    assert i['threats'] == str(len(positions))
+    assert len(path.poses) >= 2
+
+
+def test_pose_array_threats_use_default_intensity(fast_node):
+    seq = fast_node.last_seq()
+    msg = _pose_array(SCENARIO.threats.positions)
+    msg.header.stamp = Time(sec=300)
+    fast_node.poses.publish(msg)
+    i, path, _ = fast_node.wait_plan(after_seq=seq)
+    assert i['input_source'] == fast_node.topic('threat_poses') and i['threats'] == '20'
+    positions = SCENARIO.threats.positions
+    f = np.full(len(positions), PARAMETER_DEFAULTS['default_intensity'])
+    settings = settings_from_parameters(node_parameters(method='paper'))
+    expected = plan(ThreatField.from_arrays(positions, f), settings.start, settings.goal,
+                    settings.box, settings.config)
+    np.testing.assert_allclose(path_from_msg(path), expected.path, rtol=0, atol=1e-6)
+
+
+def test_flood_is_coalesced(fast_node):
+    client = fast_node.client
+    flood = client.publisher(fast_node.topic('threats'), PointCloud2, DEEP_LATCHED)
+    client.wait_matched(flood)
+    before = fast_node.infos()[-1]
+    seq = int(before['input_seq'])
+    n = 30
+    rng = np.random.default_rng(1)
+    for k in range(n):
+        moved = SCENARIO.threats.positions + rng.normal(scale=0.5, size=(20, 3))
+        flood.publish(cloud(moved, SCENARIO.threats.intensities, stamp=Time(sec=400 + k)))
+    last = fast_node.wait_info(lambda i: int(i['input_stamp_ns']) == (400 + n - 1) * 10**9,
+                               after_seq=seq, timeout=30.0)
+    time.sleep(0.3)
+    answered = [i for i in fast_node.infos() if int(i['input_seq']) > seq]
+    assert answered[-1] == last, 'a plan was published after the one for the last input'
+    received = int(last['inputs_received']) - int(before['inputs_received'])
+    planned = int(last['plans_completed']) - int(before['plans_completed'])
+    skipped = int(last['inputs_skipped']) - int(before['inputs_skipped'])
+    assert 0 < received <= n
+    assert planned == len(answered)
+    # Every input was either planned or replaced while waiting: nothing queued up.
+    assert planned + skipped == received
+    assert skipped > 0 and planned < received
+    seqs = [int(i['input_seq']) for i in answered]
+    assert seqs == sorted(seqs) and seqs[-1] == seq + received
+
+
+@pytest.mark.parametrize('args, topic, plans', [
+    (['rate:=4.0', 'drift:=2.0', 'drift_mode:=sinusoid'], 'threats', 3),
+    (['use_pose_array:=true'], 'threat_poses', 1),
+], ids=['cloud_4hz_drift', 'pose_array_once'])
+def test_threat_publisher_drives_replanning(fast_node, tmp_path, args, topic, plans):
+    """threat_publisher, moving threats at 4 Hz or a latched PoseArray: the planner plans."""
+    seq = fast_node.last_seq()
+    paths_before = fast_node.client.count(fast_node.topic('path'))
+    log = tmp_path / 'publisher.log'
+    cmd = [PYTHON, '-m', 'threat_planner.threat_publisher', '--ros-args', '-r', '__ns:=/fast',
+           '-p', f'scenario:={SCENARIO_FILE}']
+    for arg in args:
+        cmd += ['-p', arg]
+    proc = start_process(cmd, DOMAIN, log)
+    try:
+        stamps, after = set(), seq
+        while len(stamps) < plans:
+            i = fast_node.wait_info(lambda i: i['input_source'] == f'/fast/{topic}'
+                                    and i['level'] != 'ERROR', after_seq=after)
+            stamps.add(int(i['input_stamp_ns']))
+            after = int(i['input_seq'])
+        assert i['threats'] == '20'
+        # The publisher sends start and goal when it sees the planner subscribe; wait for
+        # the plan that uses them.
+        start_goal = SCENARIO.start.tolist() + SCENARIO.goal.tolist()
+
+        def uses_scenario_ends(msg):
+            ends = path_from_msg(msg)[[0, -1]].ravel()
+            return np.allclose(ends, start_goal, atol=1e-9)
+        fast_node.client.wait_for(fast_node.topic('path'), uses_scenario_ends, timeout=20.0,
+                                  after=paths_before)
+        assert fast_node.alive()
+    finally:
+        assert stop_process(proc) == 0, log.read_text()
+
+
+# --------------------------------------------------------------- recording
+
+
+def test_recording_holds_inputs_and_outputs(client, tmp_path):
+    target = tmp_path / 'run.mcap'
+    node = PlannerProcess(client, '/rec', {'method': 'paper', 'record': str(target)},
+                          tmp_path / 'node.log')
+    try:
+        node.start.publish(pose(SCENARIO.start, stamp=Time(sec=1)))
+        node.goal.publish(pose(SCENARIO.goal, stamp=Time(sec=2)))
+        node.threats.publish(cloud(SCENARIO.threats.positions, SCENARIO.threats.intensities,
+                                   stamp=Time(sec=3)))
+        node.wait_plan(after_seq=0, pred=lambda i: i['inputs_received'] == '3')
+        assert client.set_parameters(node.node_name, {'w': 0.7})[0].successful
+        node.wait_plan(after_seq=0, pred=lambda i: i['input_source'] == 'parameters')
+        node.threats.publish(cloud(_pos(p0_x=math.nan), _inten(), stamp=Time(sec=4)))
+        node.wait_info(lambda i: i['level'] == 'ERROR')
+        # Switch to folder mode at run time: the file is finished, a bag is started.
+        bags = tmp_path / 'bags'
+        assert client.set_parameters(node.node_name, {'record': str(bags)})[0].successful
+        seq = node.last_seq()
+        node.threats.publish(cloud(SCENARIO.threats.positions, SCENARIO.threats.intensities,
+                                   stamp=Time(sec=5)))
+        node.wait_plan(after_seq=seq)
+    finally:
+        code = node.stop(signal.SIGTERM)
+    assert code == 0, node.log()
+    assert 'closed recording' in node.log()
+
+    recorded = list(read_messages(target))  # strict: the file was finished
+    topics = {m.topic for m in recorded}
+    assert topics >= {'/rec/threats', '/rec/start', '/rec/goal_pose', '/parameter_events',
+                      '/rec/initial_path', '/rec/path', '/rec/network', '/rec/plan_info'}
+    by_topic = {t: [m for m in recorded if m.topic == t] for t in topics}
+    assert len(by_topic['/rec/threats']) == 2  # the good and the bad picture
+    events = by_topic['/parameter_events']
+    assert {p.name for p in events[0].msg.new_parameters} == set(PARAMETER_DEFAULTS)
+    assert [p.name for p in events[-1].msg.changed_parameters] == ['w']
+    # Outputs are logged when published, after the input they answer was received.
+    first_in = min(m.log_time_ns for m in by_topic['/rec/threats'])
+    assert all(m.log_time_ns >= first_in for m in by_topic['/rec/path'])
+    assert any(m.msg.status[0].level == 2 for m in by_topic['/rec/plan_info'])
+
+    bag_dirs = [d for d in bags.iterdir() if d.is_dir()]
+    assert len(bag_dirs) == 1 and (bag_dirs[0] / 'metadata.yaml').is_file()
+    in_bag = {m.topic for m in read_messages(bag_dirs[0])}
+    assert {'/rec/threats', '/rec/path', '/rec/plan_info', '/parameter_events'} <= in_bag
+
+
+def test_bad_start_up_parameters_exit_with_reason(tmp_path):
+    log = tmp_path / 'node.log'
+    proc = start_process(planner_command('/bad', {'w': 0.0}), DOMAIN, log)
+    assert proc.wait(30) == 1
+    assert 'cannot start: w: must satisfy 0 < w < 1' in log.read_text()
+    proc = start_process(planner_command('/bad', {'record': '/proc/forbidden/x.mcap'}),
+                         DOMAIN, log)
+    assert proc.wait(30) == 1
+    assert 'cannot start: /proc/forbidden/x.mcap: cannot create recording' in log.read_text()
