@@ -20,7 +20,10 @@ plan-demo: venv
 		--json demo_out/plan.json
 	@echo "figure: demo_out/plan.png"
 
-demo: plan-demo
+# The live system: planner_node + threat_publisher (drifting threats), J and timing of every
+# plan as it arrives; Ctrl-C stops both and writes demo_out/last_plan.png.
+demo: venv
+	$(BIN)/threat_planner_demo --scenario test/data/uniform20_0.yaml --figure demo_out/last_plan.png
 
 test: venv
 	$(BIN)/python -m pytest -q

@@ -43,6 +43,7 @@ setup(
             'threat-planner = threat_planner.cli:main',
             'planner_node = threat_planner.planner_node:main',
             'threat_publisher = threat_planner.threat_publisher:main',
+            'threat_planner_demo = threat_planner.live_demo:main',
         ],
     },
 )
