@@ -22,7 +22,7 @@ from threat_planner.partition import Network
 from threat_planner.threats import ThreatField
 
 #: Exact (segment x threat) pairs evaluated before edge costs switch to the cut-off.
-DENSE_PAIR_LIMIT = 4_000_000
+DENSE_PAIR_LIMIT = 500_000
 #: Cut-off radius for edge threat costs, in multiples of the threats' typical spacing.
 CUTOFF_SPACINGS = 2.0
 
