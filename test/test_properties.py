@@ -10,10 +10,13 @@ import math
 import signal
 import string
 
-from hypothesis import assume, event, HealthCheck, given, settings, strategies as st
+from hypothesis import (assume, event, example, given, HealthCheck, settings,
+                        strategies as st)
+from hypothesis.control import currently_in_test_context
 from hypothesis.extra.numpy import arrays
 import numpy as np
 import pytest
+import yaml
 
 from threat_planner.cost import CONTACT_DISTANCE, path_cost, segment_threat_costs
 from threat_planner.errors import ScenarioError, ThreatPlannerError
@@ -28,7 +31,7 @@ CALL_TIMEOUT_S = 20
 _FAST = dict(database=None, derandomize=True, deadline=None,
              suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
 CHEAP = settings(max_examples=300, **_FAST)
-PLANS = settings(max_examples=40, **_FAST)
+PLANS = settings(max_examples=60, **_FAST)
 
 
 class CallTimeout(Exception):
@@ -56,6 +59,12 @@ def _check_message(exc):
     assert '\n' not in msg, f'multi-line message: {msg!r}'
 
 
+def _note(what):
+    """Count an outcome for --hypothesis-show-statistics (inside a hypothesis test only)."""
+    if currently_in_test_context():
+        event(what)
+
+
 def _guarded(fn, *args, **kwargs):
     """Call fn under the time limit; return its value, or None after a project error."""
     try:
@@ -63,23 +72,23 @@ def _guarded(fn, *args, **kwargs):
             return fn(*args, **kwargs)
     except ThreatPlannerError as exc:
         _check_message(exc)
-        event(f'raised {type(exc).__name__}: {str(exc).split(":")[0]}')
+        _note(f'raised {type(exc).__name__}: {str(exc).split(":")[0]}')
         return None
 
 
 # ---------------------------------------------------------------------------- strategies
 
-#: Length scales of a scene: box sizes from 1e-6 to 1e7.
-scales = st.floats(-6.0, 7.0).map(lambda e: 10.0 ** e)
+#: Length scale of a scene; box sides are 1 to 10 times it, so from 1e-6 to 1e7.
+scales = st.floats(-6.0, 6.0).map(lambda e: 10.0 ** e)
 fractions = st.floats(0.0, 1.0)
 unit_points = arrays(float, 3, elements=fractions)
 
 
 @st.composite
 def boxes(draw):
-    """A valid box: size 1e-6..1e7, at the origin, offset by its size, or far away."""
+    """A valid box, sides 1e-6..1e7: at the origin, offset by its size, or up to 1e7 away."""
     scale = draw(scales)
-    size = scale * np.array(draw(st.lists(st.floats(0.1, 1.0), min_size=3, max_size=3)))
+    size = scale * np.array(draw(st.lists(st.floats(1.0, 10.0), min_size=3, max_size=3)))
     where = draw(st.sampled_from(['origin', 'near', 'far']))
     if where == 'origin':
         lo = np.zeros(3)
@@ -158,6 +167,10 @@ def planning_problems(draw):
     w = draw(st.sampled_from([0.05, 0.5, 0.95]))
     defects = ['none'] * 9 + ['intensity', 'on_threat', 'outside', 'not_finite', 'flat_box']
     defect = draw(st.sampled_from(defects))
+    for p in (start, goal):
+        # Simple draws often put an endpoint exactly on a threat; keep that for 'on_threat'.
+        if len(pos) and np.linalg.norm(pos - p, axis=1).min() <= 1e-6 * np.linalg.norm(hi - lo):
+            p += 1e-3 * (0.5 * (lo + hi) - p)
     which = draw(st.sampled_from([start, goal]))
     if defect == 'intensity' and len(pos):
         f[draw(st.integers(0, len(f) - 1))] = draw(
@@ -188,15 +201,51 @@ def _run_plan(problem, method):
     if out is None:
         return
     field, box, result = out
-    event('planned')
+    _note('planned')
     path = result.path
     assert np.array_equal(path[0], start), (path[0], start)
     assert np.array_equal(path[-1], goal), (path[-1], goal)
-    tol = 1e-9 * box.diagonal
+    # The tolerance with which Box.contains accepts the start and goal.
+    tol = 1e-9 * max(box.diagonal, 1.0)
     assert np.all(path >= box.lo - tol) and np.all(path <= box.hi + tol)
     again = path_cost(path, field.positions, field.intensities, w)
     assert np.isfinite(result.cost.J), result.cost
     assert result.cost.J == pytest.approx(again.J, rel=1e-9)
+
+
+def _problem(pos, f, start, goal, lo, hi, w=0.5):
+    arr = np.asarray
+    return (arr(pos, float).reshape(-1, 3), arr(f, float), start, goal,
+            (arr(lo, float), arr(hi, float)), w)
+
+
+#: Hand-picked problems (each one once found a bug), run for every method.
+KNOWN_PROBLEMS = {
+    'start_equals_goal_on_a_corner': _problem(
+        [[0, 0, 0.0625], [0, 0, 0.0625]], [1, 1], [0, 0, 0], [0, 0, 0], [0, 0, 0],
+        [1, 1, 0.25]),
+    'box_1e-7_wide_at_1e7': _problem(
+        [], [], [1e7] * 3, [1e7 + 1e-7] * 3, [1e7] * 3, [1e7 + 1e-7] * 3),
+    'box_1e-6_wide_at_1e7': _problem(
+        [], [], [1e7] * 3, [1e7 + 1e-6] * 3, [1e7] * 3, [1e7 + 1e-6] * 3),
+    'box_1e-6_wide_at_1e7_with_threats': _problem(
+        [[1e7 + 5e-7, 1e7 + 5e-7, 1e7 + 1e-7], [1e7 + 5e-7, 1e7 + 5e-7, 1e7 + 1e-7]],
+        [1, 1], [1e7] * 3, [1e7 + 1e-6] * 3, [1e7] * 3, [1e7 + 1e-6] * 3),
+    'huge_intensity': _problem(
+        [[0.5, 0.5, 0.5]], [1e306], [0, 0, 0], [1, 1, 1], [0, 0, 0], [1, 1, 1]),
+    'start_beyond_float_range': _problem(
+        [[0.5, 0.5, 0.5]], [1], [10 ** 400, 0, 0], [1, 1, 1], [0, 0, 0], [1, 1, 1]),
+    # Threats on two box corners, start and goal near one: the paper's chain leaves the
+    # box and box.clip() puts its vertices on the corner threat (J = inf).
+    'chain_clipped_onto_a_corner_threat': _problem(
+        [[0, 0, 0], [1, 1, 1]], [1, 1], [0.01] * 3, [0.02] * 3, [0, 0, 0], [1, 1, 1]),
+}
+
+
+@pytest.mark.parametrize('method', ['paper', 'best'])
+@pytest.mark.parametrize('name', sorted(KNOWN_PROBLEMS))
+def test_plan_on_known_problems(name, method):
+    _run_plan(KNOWN_PROBLEMS[name], method)
 
 
 @PLANS
@@ -297,6 +346,12 @@ def network_inputs(draw):
 
 
 @CHEAP
+# A threat 1e13 box diagonals away: Qhull gives up (QH6227), or leaks its point at infinity.
+@example((np.array([[1.24434462e8, 0.0, 1.24434462e8]]),
+          Box.from_corners([0, 0, 0], [1e-5, 2.5e-6, 1e-5]), 1))
+@example((np.array([[1.30830341e8] * 3]), Box.from_corners([0, 0, 0], [1e-5, 5e-6, 5e-6]), 1))
+# A box 1e-7 wide at 1e7 (54 ulps across): the lattice is flat to Qhull (QH6154).
+@example((np.zeros((0, 3)), Box.from_corners([1e7] * 3, [1e7 + 1e-7] * 3), 2))
 @given(network_inputs())
 def test_build_network_never_raises_and_neighbours_share_a_face(case):
     pts, box, divisions = case
@@ -312,8 +367,8 @@ def test_build_network_never_raises_and_neighbours_share_a_face(case):
 # ---------------------------------------------------------------------------- scenarios
 
 #: Scalars a YAML document may hold: None, bools, ints of any size, any float, strings.
-junk_scalars = (st.none() | st.booleans() | st.integers() | st.sampled_from([10 ** 400, -10 ** 400])
-                | st.floats() | st.text(max_size=8))
+junk_scalars = (st.none() | st.booleans() | st.integers()
+                | st.sampled_from([10 ** 400, -10 ** 400]) | st.floats() | st.text(max_size=8))
 junk = st.recursive(junk_scalars,
                     lambda inner: st.lists(inner, max_size=4)
                     | st.dictionaries(st.text(max_size=6), inner, max_size=4),
@@ -351,6 +406,10 @@ def scenario_dicts(draw):
 
 
 @settings(max_examples=500, **_FAST)
+@example({'bounds': {'min': [0, 0, 0], 'max': [10 ** 400, 1, 1]}, 'start': [0, 0, 0],
+          'goal': [0, 0, 0], 'threats': []})
+@example({'bounds': {'min': [0, 0, 0], 'max': [1, 1, 1]}, 'start': [0, 0, 0],
+          'goal': [1, 1, 1], 'threats': [{'position': [0, 0, 0.5], 'intensity': -10 ** 400}]})
 @given(scenario_dicts() | junk)
 def test_scenario_from_dict_raises_only_scenario_error(data):
     try:
@@ -360,11 +419,28 @@ def test_scenario_from_dict_raises_only_scenario_error(data):
         _check_message(exc)
 
 
+def _mutate(text, where, what):
+    i = int(where * len(text))
+    return text[:i] + what + text[i:]
+
+
+#: YAML that parses but that PyYAML's constructors reject with ValueError, or too deep.
+YAML_TRAPS = ['a: 2001-13-14\n', 'start: !!float abc\n', 'x: !!int x\n', '{a: ' * 1000,
+              'bounds: !!timestamp 2001-02-30\n', '\t- a\n', '*x\n']
+yaml_texts = st.one_of(
+    st.sampled_from(YAML_TRAPS),
+    st.text(alphabet=string.printable, max_size=200),
+    scenario_dicts().map(lambda d: yaml.safe_dump(d, allow_unicode=True)),
+    st.builds(_mutate, scenario_dicts().map(lambda d: yaml.safe_dump(d)), fractions,
+              st.sampled_from(YAML_TRAPS + [':', '- ', '"', '&a ', '\x00'])))
+
+
 @CHEAP
-@given(st.binary(max_size=200) | st.text(alphabet=string.printable, max_size=200)
-       .map(str.encode))
+@example(b'[' * 2000)
+@example(b'\x80')
+@given(st.binary(max_size=200) | yaml_texts.map(lambda t: t.encode('utf-8', 'replace')))
 def test_load_scenario_raises_only_scenario_error(tmp_path_factory, blob):
-    path = tmp_path_factory.mktemp('scn') / 'junk.yaml'
+    path = tmp_path_factory.getbasetemp() / 'junk.yaml'
     path.write_bytes(blob)
     try:
         with time_limit():

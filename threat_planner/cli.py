@@ -1,4 +1,4 @@
-"""Command line: ``threat-planner plan | paper``.
+"""Command line: ``threat-planner plan | paper | replay``.
 
 Errors in the user's input (a bad scenario file, a bad option value) exit with status 2 and
 one line on stderr, never a traceback.
@@ -60,8 +60,12 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             bar = _progress_bar(total, 'sweep')
         bar.update(done - bar.n)
 
-    result = plan(scenario.threats, scenario.start, scenario.goal, scenario.box, cfg,
-                  progress=progress)
+    if args.record:
+        from threat_planner.replay import record_plan
+        result, recording = record_plan(scenario, cfg, args.record, progress=progress)
+    else:
+        result = plan(scenario.threats, scenario.start, scenario.goal, scenario.box, cfg,
+                      progress=progress)
     if bar is not None:
         bar.close()
     c0, c = result.initial_cost, result.cost
@@ -75,6 +79,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
           f'feasible={result.feasible} (pitch {result.angles.max_pitch_deg:.1f} deg, '
           f'turn {result.angles.max_turn_deg:.1f} deg)')
     print(f'  time: {result.timings_ms["total_ms"]:.1f} ms ({stages} ms)')
+    if args.record:
+        print(f'  recorded: {recording}')
     if args.json:
         Path(args.json).write_text(json.dumps(result.summary(), indent=1))
     if args.plot:
@@ -104,6 +110,57 @@ def _cmd_paper(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from threat_planner.replay import load_bag, play_live, replay_bag
+    overrides = {'w': args.w, 'method': args.method, 'k': args.k, 'n_points': args.n_points,
+                 'max_pitch_deg': args.max_pitch, 'max_turn_deg': args.max_turn,
+                 'entry_candidates': args.entry_candidates}
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    bag = load_bag(args.bag, tolerant=args.tolerant)
+    if args.live:
+        bar = None
+
+        def tick(done: int, total: int) -> None:
+            nonlocal bar
+            if bar is None:
+                bar = _progress_bar(total, 'live')
+            bar.update(done - bar.n)
+
+        live = play_live(bag, rate=args.rate, namespace=args.namespace,
+                         set_parameters=not args.no_parameters, overrides=overrides,
+                         connect_timeout=args.timeout, wait=args.timeout, progress=tick)
+        if bar is not None:
+            bar.close()
+        print(f'{bag.path.name}: published {live.published} messages and '
+              f'{live.parameter_changes} parameter changes to {live.node_name} in '
+              f'{live.duration_s:.1f} s (rate {args.rate:g}); {len(live.answers)} plan_info '
+              'answers')
+        for a in live.answers:
+            print(f"  input #{a.get('input_seq')} {a.get('input_source')}: {a.get('level')}"
+                  + (f" J={float(a['J']):.6g}" if 'J' in a else '')
+                  + (f" ({a['error']})" if 'error' in a else ''))
+        if live.last_answered is False:
+            print(f'no answer to the last input within {args.timeout:g} s')
+            return 1
+        return 0
+    bar = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        if bar is None:
+            bar = _progress_bar(total, 'replay')
+        bar.update(done - bar.n)
+
+    report = replay_bag(bag, tolerance=args.tolerance, overrides=overrides, progress=progress)
+    if bar is not None:
+        bar.close()
+    print(report.table())
+    print(report.summary())
+    if args.report:
+        Path(args.report).write_text(report.markdown())
+    return 0 if report.ok else 1
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser of ``threat-planner``."""
     parser = _Parser(prog='threat-planner',
@@ -128,12 +185,50 @@ def build_parser() -> argparse.ArgumentParser:
     planner_options(p_plan)
     p_plan.add_argument('--json', help='write the result as JSON here')
     p_plan.add_argument('--plot', help='write a 3-D figure (PNG) here')
+    p_plan.add_argument('--record', metavar='OUT.mcap',
+                        help='record the run to MCAP as the planner node would (parameters, '
+                             'start, goal_pose, threats as float32 PointCloud2, and the '
+                             'outputs); the plan is made from the float32 threats')
     p_plan.set_defaults(func=_cmd_plan)
 
     p_paper = sub.add_parser('paper', help="reproduce the paper's Section IV on a scenario")
     planner_options(p_paper)
     p_paper.add_argument('--out', required=True, help='output folder')
     p_paper.set_defaults(func=_cmd_paper)
+
+    p_replay = sub.add_parser(
+        'replay', help='re-plan a recorded run and compare with the recorded plans',
+        description='Re-plan every input state of a recording (planner node or plan '
+                    '--record) with its recorded parameters and compare with the recorded '
+                    'outputs. Exit status: 0 all within tolerance, 1 a plan differs, 2 bad '
+                    'recording or option.')
+    p_replay.add_argument('bag', help='MCAP file or rosbag2 bag directory')
+    p_replay.add_argument('--tolerance', type=float, default=1e-6,
+                          help='largest path point distance [m] and relative J difference '
+                               'accepted (default 1e-6)')
+    p_replay.add_argument('--report', metavar='OUT.md', help='also write a Markdown report')
+    p_replay.add_argument('--tolerant', action='store_true',
+                          help='read a recording cut off by a crash up to its last complete '
+                               'chunk')
+    p_replay.add_argument('--w', type=float, help='threat weight instead of the recorded one')
+    p_replay.add_argument('--method', choices=METHODS, help='method instead of the recorded one')
+    p_replay.add_argument('--k', type=float, help='spring coefficient instead of the recorded')
+    p_replay.add_argument('--n-points', type=int, help='path segments instead of the recorded')
+    p_replay.add_argument('--max-pitch', type=float, help='pitch limit [deg]')
+    p_replay.add_argument('--max-turn', type=float, help='turn limit [deg]')
+    p_replay.add_argument('--entry-candidates', type=int, help='K entry/exit candidates')
+    live = p_replay.add_argument_group('live', 'publish the inputs to a running planner node')
+    live.add_argument('--live', action='store_true',
+                      help="publish the recorded inputs (and set the recorded parameters) "
+                           "with their recorded timing to a running node instead")
+    live.add_argument('--rate', type=float, default=1.0,
+                      help='playback speed factor (default 1: recorded timing)')
+    live.add_argument('--namespace', help='namespace of the live node (default: recorded)')
+    live.add_argument('--no-parameters', action='store_true',
+                      help="publish topics only; leave the node's parameters alone")
+    live.add_argument('--timeout', type=float, default=30.0,
+                      help='longest wait for the node and for its last answer [s]')
+    p_replay.set_defaults(func=_cmd_replay)
     return parser
 
 

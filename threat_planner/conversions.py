@@ -55,6 +55,8 @@ _INT32_MAX = 2**31 - 1
 _MIN_SEGMENT_M = 1e-9
 
 _CLOUD_FIELDS = ('x', 'y', 'z', 'intensity')
+# numpy's largest itemsize (a C int): a longer point or row cannot be decoded (nor sent).
+_MAX_STEP = 2**31 - 1
 _FLOAT_SIZES = {PointField.FLOAT32: 4, PointField.FLOAT64: 8}
 _DATATYPE_NAMES = {
     PointField.INT8: 'INT8',
@@ -234,6 +236,9 @@ def _cloud_point_dtype(msg: PointCloud2) -> np.dtype:
         raise InputError(
             f'PointCloud2 point_step {msg.point_step} is smaller than the {needed} bytes '
             'its fields need')
+    if msg.point_step > _MAX_STEP:
+        raise InputError(
+            f'PointCloud2 point_step {msg.point_step} is larger than {_MAX_STEP} bytes')
     return np.dtype({'names': list(_CLOUD_FIELDS), 'formats': formats,
                      'offsets': offsets, 'itemsize': int(msg.point_step)})
 
@@ -272,7 +277,8 @@ def threats_from_pointcloud2(
     ------
     InputError
         On a frame mismatch, too many points, a missing, non-float, multi-count or
-        overlapping field, a ``point_step`` or ``row_step`` too small for the layout,
+        overlapping field, a ``point_step`` or ``row_step`` too small for the layout
+        (or over 2**31 - 1 bytes),
         a data length other than ``row_step * height``, non-finite values or a
         non-positive intensity.
 
@@ -294,6 +300,8 @@ def threats_from_pointcloud2(
     if height * width == 0:
         return np.empty((0, 3), dtype=np.float64), np.empty(0, dtype=np.float64)
 
+    if row_step > _MAX_STEP:
+        raise InputError(f'PointCloud2 row_step {row_step} is larger than {_MAX_STEP} bytes')
     # A row dtype with itemsize row_step skips row padding without copying the buffer.
     row_dtype = np.dtype({'names': ['points'], 'formats': [(point_dtype, (width,))],
                           'offsets': [0], 'itemsize': row_step})

@@ -37,6 +37,8 @@ K_SWEEP = tuple(range(500, 3001, 100))
 #: Segments and stopping tolerance of the coarse screening minimisation ('best').
 COARSE_SEGMENTS = 8
 COARSE_TOLERANCE = 1e-4
+#: Screened basins refined, best first, until one meets the angle limits ('best').
+FEASIBILITY_TRIES = 3
 
 
 @dataclass(frozen=True)
@@ -378,28 +380,33 @@ def _optimise_routes(routes: list[list[int]], network: Network, s: NDArray, t: N
     f_pos, f_int = threats.positions, threats.intensities
     # The straight line is the other natural start, and wins when length dominates.
     seeds = [(f'route {i}', seq) for i, seq in enumerate(routes)] + [('straight line', [])]
-    best = None
+    screened = []
     for name, seq in seeds:
         initial = np.vstack([s, network.nodes[seq], t]) if seq else np.vstack([s, t])
         coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
                                90.0, 180.0, cutoff=cutoff,
                                tolerance=COARSE_TOLERANCE).points
-        j = path_cost(coarse, f_pos, f_int, w).J
-        if best is None or j < best[0]:
-            best = (j, name, seq, initial, coarse)
+        screened.append((path_cost(coarse, f_pos, f_int, w).J, name, seq, coarse))
+    screened.sort(key=lambda item: item[0])
     clock.lap('screening_ms')
-    _, name, seq, initial, coarse = best
-    if not seq:
-        # Report the best network route as the initial path even when the line won.
-        seq = routes[0]
-        initial = np.vstack([s, network.nodes[seq], t])
-    opt = minimise_cost(resample(coarse, config.n_points), threats, w, bounds,
-                        config.max_pitch_deg, config.max_turn_deg, cutoff=cutoff)
+    best: _Candidate | None = None
+    # Refine the best basin; if the angle limits cannot be met there, the next basins get
+    # a chance (a feasible path beats any infeasible one, then lower J wins).
+    for _, name, seq, coarse in screened[:FEASIBILITY_TRIES]:
+        opt = minimise_cost(resample(coarse, config.n_points), threats, w, bounds,
+                            config.max_pitch_deg, config.max_turn_deg, cutoff=cutoff)
+        seq = seq or routes[0]   # the line won: report the best route as the initial path
+        cand = _Candidate(seq, np.vstack([s, network.nodes[seq], t]), None, None, opt.points,
+                          float('nan'), 0, True, path_cost(opt.points, f_pos, f_int, w),
+                          check_angles(opt.points, config.max_pitch_deg,
+                                       config.max_turn_deg), seed=name)
+        if best is None or ((cand.angles.feasible, -cand.cost.J)
+                            > (best.angles.feasible, -best.cost.J)):
+            best = cand
+        if best.angles.feasible:
+            break
     clock.lap('optimisation_ms')
-    return _Candidate(seq, initial, None, None, opt.points, float('nan'), 0, True,
-                      path_cost(opt.points, f_pos, f_int, w),
-                      check_angles(opt.points, config.max_pitch_deg, config.max_turn_deg),
-                      seed=name)
+    return best
 
 
 def with_overrides(config: PlannerConfig, **changes: object) -> PlannerConfig:

@@ -76,7 +76,8 @@ from threat_planner.recording import McapRecorder, TopicQos
 from threat_planner.ros_main import run_node
 from threat_planner.threats import as_point, Box, ThreatField
 
-__all__ = ['NodeSettings', 'PARAMETER_DEFAULTS', 'PlanWorker', 'ThreatPlannerNode', 'main',
+__all__ = ['NodeSettings', 'PARAMETER_DEFAULTS', 'PlanWorker', 'ThreatPlannerNode',
+           'input_values', 'main', 'plan_done_info', 'plan_markers',
            'settings_from_parameters']
 
 NODE_NAME = 'threat_planner'
@@ -694,14 +695,8 @@ class ThreatPlannerNode(Node):
         # takes ~0.1 s, which a path follower should not wait for.
         self._hand_over('paths', outcome)
         try:
-            scale = s.box.diagonal / math.sqrt(3.0) / 100.0
-            net = result.network
-            outcome.network = network_markers(
-                request.threats.positions, request.threats.intensities,
-                vertices=net.vertices, delaunay_edges=net.delaunay_edges(), nodes=net.nodes,
-                network_edges=net.edges, initial_path=result.initial_path,
-                path=result.path, frame_id=s.frame_id, stamp=request.stamp,
-                threat_diameter=4.0 * scale, node_diameter=scale, line_width=0.2 * scale)
+            outcome.network = plan_markers(result, request.threats, s.box, s.frame_id,
+                                           request.stamp)
         except Exception as exc:  # noqa: B902 - a drawing bug must not lose the plan
             outcome.network_error = f'{type(exc).__name__}: {exc}'
         outcome.messages_ms = 1e3 * (time.perf_counter() - t1)
@@ -723,16 +718,8 @@ class ThreatPlannerNode(Node):
         self._record(publisher.topic_name, msg)
 
     def _input_values(self, seq: int, source: str, stamp: Time) -> dict[str, object]:
-        return {
-            'input_seq': seq,
-            'input_source': source,
-            'input_stamp_ns': stamp_to_ns(stamp),
-            'frame_id': self._settings.frame_id,
-            'inputs_received': self._received,
-            'inputs_rejected': self._rejected,
-            'inputs_skipped': self._skipped,
-            'plans_completed': self._plans,
-        }
+        return input_values(seq, source, stamp, self._settings.frame_id, self._received,
+                            self._rejected, self._skipped, self._plans)
 
     def _publish_outcomes(self) -> None:
         while True:
@@ -760,23 +747,16 @@ class ThreatPlannerNode(Node):
         req = outcome.request
         result = outcome.result
         self._plans += 1
-        values = self._input_values(req.seq, req.source, req.stamp)
-        values.update(_result_values(result, len(req.threats)))
-        values['queue_ms'] = outcome.queue_ms
-        values['plan_wall_ms'] = outcome.plan_ms
-        values['messages_ms'] = outcome.messages_ms
-        status = 'OK' if result.feasible else 'WARN'
-        message = (f'plan for input #{req.seq} ({req.source}): J={result.cost.J:.6g} '
-                   f'through {len(req.threats)} threats in {outcome.plan_ms:.0f} ms'
-                   + ('' if result.feasible else '; violates the pitch or turn limit'))
+        info = plan_done_info(self._input_values(req.seq, req.source, req.stamp), result,
+                              len(req.threats), req.stamp, outcome.queue_ms, outcome.plan_ms,
+                              outcome.messages_ms, outcome.network_error)
         if outcome.network is not None:
             self._publish(self._pub_network, outcome.network)
         else:
-            values['network_error'] = outcome.network_error
             self.get_logger().warning(f'input #{req.seq}: network markers not drawn: '
                                       f'{outcome.network_error}')
-        self._publish(self._pub_info, plan_info_msg(status, message, values, req.stamp))
-        self.get_logger().info(message)
+        self._publish(self._pub_info, info)
+        self.get_logger().info(info.status[0].message)
 
     # -- life cycle ------------------------------------------------------------------
 
@@ -797,6 +777,114 @@ class ThreatPlannerNode(Node):
 
 def _type_name(msg_type: type) -> str:
     return f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
+
+
+def input_values(seq: int, source: str, stamp: Time, frame_id: str, received: int,
+                 rejected: int, skipped: int, plans: int) -> dict[str, object]:
+    """Return the ``plan_info`` values naming an input and the node's counters.
+
+    Parameters
+    ----------
+    seq : int
+        Input sequence number.
+    source : str
+        Topic of the input, or ``'parameters'``.
+    stamp : builtin_interfaces.msg.Time
+        The input's stamp.
+    frame_id : str
+        Frame of the outputs.
+    received, rejected, skipped, plans : int
+        Counters of inputs received, rejected and skipped, and of plans completed.
+
+    Returns
+    -------
+    dict[str, object]
+        Keys in ``plan_info`` order.
+
+    """
+    return {
+        'input_seq': seq,
+        'input_source': source,
+        'input_stamp_ns': stamp_to_ns(stamp),
+        'frame_id': frame_id,
+        'inputs_received': received,
+        'inputs_rejected': rejected,
+        'inputs_skipped': skipped,
+        'plans_completed': plans,
+    }
+
+
+def plan_markers(result: PlanResult, threats: ThreatField, box: Box, frame_id: str,
+                 stamp: Time) -> MarkerArray:
+    """Draw a plan's threats, mesh, network and paths, sized to the flight box.
+
+    Parameters
+    ----------
+    result : PlanResult
+        The plan.
+    threats : ThreatField
+        The threats it was planned through.
+    box : Box
+        Flight box (sets the marker sizes).
+    frame_id : str
+        Frame of the markers.
+    stamp : builtin_interfaces.msg.Time
+        Stamp of the markers (the input's).
+
+    Returns
+    -------
+    MarkerArray
+        What the node publishes on ``network``.
+
+    """
+    scale = box.diagonal / math.sqrt(3.0) / 100.0
+    net = result.network
+    return network_markers(
+        threats.positions, threats.intensities,
+        vertices=net.vertices, delaunay_edges=net.delaunay_edges(), nodes=net.nodes,
+        network_edges=net.edges, initial_path=result.initial_path,
+        path=result.path, frame_id=frame_id, stamp=stamp,
+        threat_diameter=4.0 * scale, node_diameter=scale, line_width=0.2 * scale)
+
+
+def plan_done_info(values: Mapping[str, object], result: PlanResult, n_threats: int,
+                   stamp: Time, queue_ms: float, plan_ms: float, messages_ms: float,
+                   network_error: Optional[str] = None) -> DiagnosticArray:
+    """Build the ``plan_info`` of a finished plan (OK, or WARN if an angle limit is broken).
+
+    Parameters
+    ----------
+    values : Mapping[str, object]
+        The input's values (:func:`input_values`); the result's are appended.
+    result : PlanResult
+        The plan.
+    n_threats : int
+        Threats planned through.
+    stamp : builtin_interfaces.msg.Time
+        The input's stamp.
+    queue_ms, plan_ms, messages_ms : float
+        Wait before planning, planning and marker drawing times [ms].
+    network_error : str, optional
+        Why the markers could not be drawn.
+
+    Returns
+    -------
+    DiagnosticArray
+        The message; its status message is the node's log line.
+
+    """
+    values = dict(values)
+    values.update(_result_values(result, n_threats))
+    values['queue_ms'] = queue_ms
+    values['plan_wall_ms'] = plan_ms
+    values['messages_ms'] = messages_ms
+    if network_error is not None:
+        values['network_error'] = network_error
+    status = 'OK' if result.feasible else 'WARN'
+    message = (f'plan for input #{values["input_seq"]} ({values["input_source"]}): '
+               f'J={result.cost.J:.6g} through {n_threats} threats in {plan_ms:.0f} ms'
+               + ('' if result.feasible else '; violates the pitch or turn limit'))
+    return plan_info_msg(status, message, values, stamp)
 
 
 def _result_values(result: PlanResult, n_threats: int) -> dict[str, object]:

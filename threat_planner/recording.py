@@ -60,6 +60,7 @@ __all__ = [
     'msg_dependencies',
     'read_messages',
     'read_ros_messages',
+    'recorded_topics',
 ]
 
 _LOG = logging.getLogger(__name__)
@@ -1000,6 +1001,77 @@ def _iter_recording(path: PathLike, tolerant: bool, topics: Optional[Iterable[st
             yield from _iter_tolerant(file, wanted, decoder)
         else:
             yield from _iter_strict(file, wanted, decoder)
+
+
+def _stream_channels(path: Path) -> List[tuple]:
+    channels: List[tuple] = []
+    schemas: Dict[int, Schema] = {}
+    try:
+        stream = open(path, 'rb')
+    except OSError as exc:
+        raise RecordingError(f'{path}: cannot open ({exc.strerror or exc})') from exc
+    with stream:
+        records = StreamReader(stream, validate_crcs=True).records
+        try:
+            header = next(records)
+        except Exception as exc:  # noqa: B902 - anything but a header means not MCAP
+            raise RecordingError(f'{path}: not an MCAP file ({_one_line(exc)})') from exc
+        if not isinstance(header, Header):
+            raise RecordingError(f'{path}: not an MCAP file (no header record)')
+        while True:
+            try:
+                record = next(records)
+            except Exception:  # noqa: B902 - StopIteration, or a cut-off tail
+                return channels
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                _check_channel(path, record, schemas.get(record.schema_id))
+                channels.append((record, schemas.get(record.schema_id)))
+            elif isinstance(record, Footer):
+                return channels
+
+
+def recorded_topics(path: PathLike, *, tolerant: bool = False) -> Dict[str, str]:
+    """Return the topics of a recording and their types, without decoding any message.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.mcap`` file or a bag directory.
+    tolerant : bool
+        As in :func:`read_messages`: ``True`` accepts a file cut off by a crash (the
+        channels written before the cut are listed).
+
+    Returns
+    -------
+    dict[str, str]
+        ``{topic: 'pkg/msg/Type'}`` in the order the channels were recorded.
+
+    Raises
+    ------
+    RecordingError
+        As :func:`read_messages` (missing, non-MCAP, truncated in strict mode, corrupt,
+        or a channel that is not ``cdr``/``ros2msg``).
+
+    """
+    topics: Dict[str, str] = {}
+    for file in _mcap_files(Path(path)):
+        channels = None
+        if not tolerant:
+            # Checks magic, footer, summary and channel encodings; reads no chunk.
+            for _ in _iter_strict(file, frozenset(), _Decoder(file, False)):
+                pass
+            with open(file, 'rb') as stream:
+                summary = make_reader(stream).get_summary()
+            if summary is not None:
+                channels = [(c, summary.schemas.get(c.schema_id))
+                            for c in sorted(summary.channels.values(), key=lambda c: c.id)]
+        if channels is None:
+            channels = _stream_channels(file)
+        for channel, schema in channels:
+            topics.setdefault(channel.topic, schema.name if schema is not None else '')
+    return topics
 
 
 def read_messages(path: PathLike, *, tolerant: bool = False,

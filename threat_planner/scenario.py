@@ -101,7 +101,7 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
         start, goal = check_endpoints(data['start'], data['goal'], box, field)
     except InputError as exc:
         raise fail(str(exc)) from None
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise fail(f'bad value ({exc})') from None
     return Scenario(str(data.get('name', Path(source).stem)), str(data.get('frame_id', 'map')),
                     str(data.get('description', '') or ''), box, start, goal, field)
@@ -121,12 +121,12 @@ def load_scenario(path: str | Path) -> Scenario:
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_bytes()
     except OSError as exc:
         raise ScenarioError(f'{path}: cannot read ({exc.strerror})') from None
     try:
         data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
+    except (yaml.YAMLError, ValueError, RecursionError) as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}' if mark else ''
         raise ScenarioError(f'{path}: not valid YAML{where}') from None

@@ -22,7 +22,7 @@ def _finite_array(name: str, value: ArrayLike, shape_tail: tuple[int, ...]) -> N
     """Convert to a float array of shape (..., *shape_tail) with only finite values."""
     try:
         arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise InputError(f'{name}: not numeric ({exc})') from None
     if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
         if not (arr.size == 0 and shape_tail):
@@ -50,7 +50,7 @@ def as_point(name: str, value: ArrayLike) -> NDArray:
     """
     try:
         arr = np.asarray(value, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise InputError(f'{name}: not a 3-D point: {value!r}') from None
     if arr.shape != (3,):
         raise InputError(f'{name}: expected 3 coordinates, got {arr.size}')

@@ -1,0 +1,422 @@
+"""Flood the planner node with threat updates and check that it keeps up without a backlog.
+
+A planner node is started as its own process (method 'paper', discovery limited to this
+host) and sent ``--threats`` threats (``test/data/big300_0.yaml``, every picture jittered by
+a few centimetres so that each one is new) at ``--rate`` Hz for ``--seconds`` s. Meanwhile,
+once a second, this script
+
+* times a parameter get against the node (the executor must stay responsive: < 100 ms),
+* samples the node's resident memory (``VmRSS`` in ``/proc/<pid>/status``).
+
+Every ``plan_info`` that arrives is matched by its ``input_stamp_ns`` to the picture it
+answers; the lag is the time from that picture's ``publish()`` to the arrival of its
+``plan_info``. After the flood stops, the last plan must answer the last picture (the node
+coalesces updates, latest wins) and arrive within a couple of plan times (no queue).
+
+Usage::
+
+    .venv/bin/python bench/flood.py                      # 60 s at 100 Hz, 300 threats
+    .venv/bin/python bench/flood.py --seconds 10 --out ''
+
+The shared measuring helpers here (:func:`rss_kib`, :class:`Sampler`,
+:class:`ParameterProbe`, :func:`stats`) are also used by ``soak.py`` and ``faults.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+import signal
+import sys
+import tempfile
+import threading
+import time
+from typing import Callable, Optional, Sequence
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / 'test'))
+sys.path.insert(0, str(REPO))
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from nav_msgs.msg import Path as PathMsg  # noqa: E402
+from node_harness import (cloud, domain_id, info, LATCHED, planner_command,  # noqa: E402
+                          RosClient, start_process, stop_process)
+import numpy as np  # noqa: E402
+from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
+from sensor_msgs.msg import PointCloud2  # noqa: E402
+
+from threat_planner.conversions import ns_to_stamp, stamp_to_ns  # noqa: E402
+from threat_planner.scenario import load_scenario, Scenario  # noqa: E402
+
+RESULTS = REPO / 'bench' / 'results'
+DEFAULT_SCENARIO = REPO / 'test' / 'data' / 'big300_0.yaml'
+#: Stamp of the first input [ns]; input k is stamped STAMP0_NS + k ms (unique, sortable).
+STAMP0_NS = 1_000 * 10**9
+
+
+# ---------------------------------------------------------------- shared helpers
+
+
+def rss_kib(pid: int) -> Optional[int]:
+    """Resident set size of a process.
+
+    Parameters
+    ----------
+    pid : int
+        Process id.
+
+    Returns
+    -------
+    int or None
+        ``VmRSS`` [KiB], or None if the process is gone.
+
+    """
+    try:
+        with open(f'/proc/{pid}/status') as status:
+            for line in status:
+                if line.startswith('VmRSS:'):
+                    return int(line.split()[1])
+    except (OSError, ValueError):
+        return None
+    return None
+
+
+def stats(values: Sequence[float]) -> dict[str, float]:
+    """Return count, median, p95 and max of `values` (NaN for an empty sequence).
+
+    Parameters
+    ----------
+    values : sequence of float
+        Samples.
+
+    Returns
+    -------
+    dict
+        Keys ``n``, ``median``, ``p95``, ``max``.
+
+    """
+    if not len(values):
+        return {'n': 0, 'median': float('nan'), 'p95': float('nan'), 'max': float('nan')}
+    arr = np.asarray(values, dtype=float)
+    return {'n': int(arr.size), 'median': float(np.median(arr)),
+            'p95': float(np.percentile(arr, 95)), 'max': float(arr.max())}
+
+
+class ParameterProbe:
+    """Times ``get_parameters`` calls to a remote node.
+
+    Parameters
+    ----------
+    client : RosClient
+        The spinning client node the service client is created on.
+    node_name : str
+        Fully qualified name of the remote node.
+
+    """
+
+    def __init__(self, client: RosClient, node_name: str) -> None:
+        self._params = AsyncParameterClient(client.node, node_name)
+
+    def wait_ready(self, timeout: float = 30.0) -> bool:
+        """Wait for the node's parameter services.
+
+        Parameters
+        ----------
+        timeout : float
+            Longest wait [s].
+
+        Returns
+        -------
+        bool
+            True if the services are available.
+
+        """
+        return self._params.wait_for_services(timeout_sec=timeout)
+
+    def get_ms(self, name: str = 'max_threats', timeout: float = 5.0) -> float:
+        """Time one parameter get.
+
+        Parameters
+        ----------
+        name : str
+            Parameter to get.
+        timeout : float
+            Longest wait [s].
+
+        Returns
+        -------
+        float
+            Round trip [ms]; ``inf`` if no answer came within `timeout`.
+
+        """
+        done = threading.Event()
+        t0 = time.perf_counter()
+        future = self._params.get_parameters([name])
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(timeout) or future.result() is None:
+            return float('inf')
+        return 1e3 * (time.perf_counter() - t0)
+
+
+class Sampler:
+    """Calls a function every `period` s in a background thread and keeps the results.
+
+    Parameters
+    ----------
+    fn : Callable[[], object]
+        What to sample; its result is stored with the time (``time.monotonic()``).
+    period : float
+        Sampling period [s].
+
+    """
+
+    def __init__(self, fn: Callable[[], object], period: float = 1.0) -> None:
+        self._fn = fn
+        self._period = period
+        self._stop = threading.Event()
+        self.samples: list[tuple[float, object]] = []
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+
+    def start(self) -> 'Sampler':
+        """Start sampling; returns self."""
+        self._thread.start()
+        return self
+
+    def stop(self) -> list[tuple[float, object]]:
+        """Stop sampling and return the samples."""
+        self._stop.set()
+        self._thread.join(10.0)
+        return self.samples
+
+    def values(self) -> list:
+        """The sampled values, without their times, leaving out None."""
+        return [v for _, v in list(self.samples) if v is not None]
+
+    def _loop(self) -> None:
+        next_t = time.monotonic()
+        while not self._stop.is_set():
+            self.samples.append((time.monotonic(), self._fn()))
+            next_t += self._period
+            self._stop.wait(max(0.0, next_t - time.monotonic()))
+
+
+def memory_summary(samples_kib: Sequence[int]) -> dict[str, float]:
+    """Start, end, max and growth of RSS samples.
+
+    Parameters
+    ----------
+    samples_kib : sequence of int
+        RSS samples [KiB] in time order.
+
+    Returns
+    -------
+    dict
+        ``start_mib``, ``end_mib``, ``max_mib``, ``growth_pct`` (end vs start) and
+        ``max_growth_pct`` (max vs start).
+
+    """
+    start, end, peak = samples_kib[0], samples_kib[-1], max(samples_kib)
+    return {'samples': len(samples_kib), 'start_mib': start / 1024, 'end_mib': end / 1024,
+            'max_mib': peak / 1024, 'growth_pct': 100.0 * (end - start) / start,
+            'max_growth_pct': 100.0 * (peak - start) / start}
+
+
+def scenario_params(scenario: Scenario, **extra) -> dict:
+    """Node parameters for a scenario's bounds, start, goal and frame, plus `extra`."""
+    params = {'bounds': scenario.box.lo.tolist() + scenario.box.hi.tolist(),
+              'start': scenario.start.tolist(), 'goal': scenario.goal.tolist(),
+              'frame_id': scenario.frame_id}
+    params.update(extra)
+    return params
+
+
+def write_results(stem: str, data: dict, markdown: str) -> None:
+    """Write ``bench/results/<stem>.json`` and ``<stem>.md``."""
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (RESULTS / f'{stem}.json').write_text(json.dumps(data, indent=2, sort_keys=True) + '\n')
+    (RESULTS / f'{stem}.md').write_text(markdown.rstrip() + '\n')
+
+
+# ------------------------------------------------------------------------ flood
+
+
+def run_flood(client: RosClient, scenario: Scenario, rate: float, seconds: float,
+              log_path: Path, ns: str = '/flood', method: str = 'paper',
+              n_points: int = 20, threats: Optional[int] = None, seed: int = 0) -> dict:
+    """Start a node, flood it, stop it; return the measurements.
+
+    Parameters
+    ----------
+    client : RosClient
+        Client in the node's domain.
+    scenario : Scenario
+        Threats, bounds, start and goal.
+    rate : float
+        Threat pictures per second [Hz].
+    seconds : float
+        Length of the flood [s].
+    log_path : Path
+        Node's log file.
+    ns : str
+        Namespace of the node.
+    method : str
+        Planner method.
+    n_points : int
+        Chain segments of the final path.
+    threats : int, optional
+        Use only the first this many threats of the scenario.
+    seed : int
+        Seed of the jitter.
+
+    Returns
+    -------
+    dict
+        Inputs sent and received, plans, lags [ms], parameter get times [ms], RSS [MiB],
+        whether the last plan answers the last input, and the node's exit code.
+
+    """
+    positions0 = scenario.threats.positions[:threats]
+    intensities = scenario.threats.intensities[:threats]
+    proc = start_process(planner_command(ns, scenario_params(
+        scenario, method=method, n_points=n_points)), client.domain, log_path)
+    info_topic, path_topic = f'{ns}/plan_info', f'{ns}/path'
+    client.subscribe(info_topic, DiagnosticArray)
+    client.subscribe(path_topic, PathMsg)
+    pub = client.publisher(f'{ns}/threats', PointCloud2, LATCHED)
+    probe = ParameterProbe(client, f'{ns}/threat_planner')
+    rng = np.random.default_rng(seed)
+    sent_at: dict[int, float] = {}
+    try:
+        client.wait_matched(pub, timeout=30.0)
+        if not probe.wait_ready(30.0):
+            raise RuntimeError('parameter services of the node did not appear')
+        # Warm up (imports, first-call caches) so that the flood measures steady state.
+        pub.publish(cloud(positions0, intensities, scenario.frame_id, ns_to_stamp(1)))
+        client.wait_for(info_topic, lambda m: info(m)['input_stamp_ns'] == '1', 60.0)
+        time.sleep(1.0)
+        rss = Sampler(lambda: rss_kib(proc.pid)).start()
+        gets = Sampler(probe.get_ms).start()
+        period, n = 1.0 / rate, int(round(seconds * rate))
+        t0 = time.monotonic()
+        for k in range(n):
+            delay = t0 + k * period - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            stamp_ns = STAMP0_NS + k * 10**6
+            moved = positions0 + rng.normal(scale=0.05, size=positions0.shape)
+            msg = cloud(moved, intensities, scenario.frame_id, ns_to_stamp(stamp_ns))
+            sent_at[stamp_ns] = time.monotonic()
+            pub.publish(msg)
+        t_end = time.monotonic()
+        last_ns = STAMP0_NS + (n - 1) * 10**6
+        last = client.wait_for(info_topic,
+                               lambda m: int(info(m)['input_stamp_ns']) == last_ns, 60.0)
+        drain_s = time.monotonic() - t_end
+        time.sleep(1.0)  # would show any plan published after the last input's
+        gets.stop()
+        rss.stop()
+        alive = proc.poll() is None
+        answered = [(t, info(m)) for t, m in list(client.messages[info_topic])
+                    if int(info(m)['input_stamp_ns']) >= STAMP0_NS]
+        final_path = client.last(path_topic)
+    finally:
+        code = stop_process(proc, signal.SIGINT)
+    plans = [(t, i) for t, i in answered if i['level'] != 'ERROR']
+    errors = [i['message'] for _, i in answered if i['level'] == 'ERROR']
+    lags = [1e3 * (t - sent_at[int(i['input_stamp_ns'])]) for t, i in plans]
+    behind = [sum(1 for s in sent_at.values() if s <= t) - 1
+              - (int(i['input_stamp_ns']) - STAMP0_NS) // 10**6 for t, i in plans]
+    flood_plans = [t for t, _ in plans if t <= t_end]
+    last_info = info(last)
+    received = int(last_info['inputs_received']) - 1  # minus the warm-up picture
+    return {
+        'threats': len(positions0), 'rate_hz': rate, 'seconds': seconds, 'method': method,
+        'n_points': n_points, 'inputs_sent': n, 'achieved_send_rate_hz': n / (t_end - t0),
+        'inputs_received': received,
+        'inputs_skipped': int(last_info['inputs_skipped']),
+        'inputs_rejected': int(last_info['inputs_rejected']),
+        'plans_completed': len(plans), 'errors': errors,
+        'plan_rate_hz': len(flood_plans) / (t_end - t0),
+        'lag_ms': stats(lags), 'inputs_behind': stats(behind),
+        'last_plan_answers_last_input': bool(plans)
+        and int(plans[-1][1]['input_stamp_ns']) == last_ns
+        and stamp_to_ns(final_path.header.stamp) == last_ns,
+        'drain_s': drain_s,
+        # Every input received was planned, coalesced away or refused: nothing queued.
+        'accounted': received == (int(last_info['plans_completed']) - 1
+                                  + int(last_info['inputs_skipped'])
+                                  + int(last_info['inputs_rejected'])),
+        'param_get_ms': stats(gets.values()),
+        'param_get_timeouts': sum(1 for v in gets.values() if v == float('inf')),
+        'rss': memory_summary(rss.values()),
+        'alive_after': alive, 'exit_code': code,
+    }
+
+
+def markdown(r: dict) -> str:
+    """Markdown summary of one flood."""
+    lag, get, mem = r['lag_ms'], r['param_get_ms'], r['rss']
+    return '\n'.join([
+        f"### Flood: {r['threats']} threats at {r['rate_hz']:g} Hz for {r['seconds']:g} s "
+        f"(method {r['method']}, n_points {r['n_points']})",
+        '',
+        '| figure | value |',
+        '|---|---:|',
+        f"| inputs sent / received by the node | {r['inputs_sent']} / "
+        f"{r['inputs_received']} |",
+        f"| achieved send rate | {r['achieved_send_rate_hz']:.1f} Hz |",
+        f"| plans published / inputs coalesced (skipped) | {r['plans_completed']} / "
+        f"{r['inputs_skipped']} |",
+        f"| plan rate during the flood | {r['plan_rate_hz']:.2f} Hz |",
+        f"| lag publish -> plan_info, median / p95 / max | {lag['median']:.0f} / "
+        f"{lag['p95']:.0f} / {lag['max']:.0f} ms |",
+        f"| newer inputs already sent when a plan arrived, median / max | "
+        f"{r['inputs_behind']['median']:.0f} / {r['inputs_behind']['max']:.0f} |",
+        f"| last plan answers last input | {r['last_plan_answers_last_input']} |",
+        f"| received = planned + coalesced + refused | {r['accounted']} |",
+        f"| last input -> its plan after the flood stopped | {1e3 * r['drain_s']:.0f} ms |",
+        f"| parameter get, median / p95 / max ({get['n']} probes, 1 Hz) | "
+        f"{get['median']:.1f} / {get['p95']:.1f} / {get['max']:.1f} ms |",
+        f"| RSS start / end / max | {mem['start_mib']:.1f} / {mem['end_mib']:.1f} / "
+        f"{mem['max_mib']:.1f} MiB |",
+        f"| RSS growth end / max vs start | {mem['growth_pct']:+.1f} % / "
+        f"{mem['max_growth_pct']:+.1f} % |",
+        f"| node alive, exit code after SIGINT | {r['alive_after']}, {r['exit_code']} |",
+    ])
+
+
+def main(argv: Optional[list[str]] = None) -> int:
+    """Run the flood and print (and write) the results."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--scenario', type=Path, default=DEFAULT_SCENARIO)
+    parser.add_argument('--rate', type=float, default=100.0, help='[Hz]')
+    parser.add_argument('--seconds', type=float, default=60.0)
+    parser.add_argument('--threats', type=int, help='use only the first N threats')
+    parser.add_argument('--method', default='paper')
+    parser.add_argument('--n-points', type=int, default=20)
+    parser.add_argument('--out', default='reliability_flood',
+                        help="results stem under bench/results ('' = do not write)")
+    args = parser.parse_args(argv)
+
+    scenario = load_scenario(args.scenario)
+    client = RosClient(domain_id(86, span=5), 'flood_bench')
+    try:
+        with tempfile.TemporaryDirectory(prefix='flood_') as tmp:
+            result = run_flood(client, scenario, args.rate, args.seconds,
+                               Path(tmp) / 'node.log', method=args.method,
+                               n_points=args.n_points, threats=args.threats)
+    finally:
+        client.close()
+    result['scenario'] = scenario.name
+    text = markdown(result)
+    print(text)
+    if args.out:
+        write_results(args.out, result, text)
+    ok = (result['last_plan_answers_last_input'] and result['param_get_ms']['max'] < 100.0
+          and result['exit_code'] == 0 and not result['errors'])
+    return 0 if ok else 1
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
