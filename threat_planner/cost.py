@@ -70,18 +70,20 @@ def _series(x2: NDArray, coeffs: NDArray) -> NDArray:
     return out
 
 
-def _antiderivatives(t: NDArray, h: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+def _antiderivatives(t: NDArray, h: NDArray, moment: bool = True
+                     ) -> tuple[NDArray, NDArray, NDArray | None]:
     """Split antiderivatives of 1/(t^2+h^2)^2 and 1/(t^2+h^2)^3 at abscissa t.
 
     Returns ``(c, r2, r3)`` such that the antiderivatives are ``c*pi/(4 h^3) + r2`` and
     ``c*3pi/(16 h^5) + r3``, where c = sign(t) for |t| > h and 0 otherwise. Differences of c
-    are then exact integers, so the large terms cancel without rounding.
+    are then exact integers, so the large terms cancel without rounding. With
+    ``moment=False`` the second (needed only for gradients) is skipped and r3 is None.
     """
     abs_t = np.abs(t)
     far = abs_t > h
     c = np.where(far, np.sign(t), 0.0)
     r2 = np.empty_like(t)
-    r3 = np.empty_like(t)
+    r3 = np.empty_like(t) if moment else None
 
     # Near the foot point, the plain antiderivative in r = t/h is well conditioned.
     near = ~far
@@ -93,7 +95,8 @@ def _antiderivatives(t: NDArray, h: NDArray) -> tuple[NDArray, NDArray, NDArray]
         q = 1.0 / (1.0 + r * r)
         at = np.arctan(r)
         r2[near] = (at + r * q) / (2.0 * hn ** 3)
-        r3[near] = (0.375 * at + 0.375 * r * q + 0.25 * r * q * q) / hn ** 5
+        if moment:
+            r3[near] = (0.375 * at + 0.375 * r * q + 0.25 * r * q * q) / hn ** 5
 
     # Far from it, write atan(t/h) = sign(t) pi/2 - atan(h/t) and keep only the remainder,
     # which behaves like -1/(3 t^3) and -1/(5 t^5).
@@ -103,19 +106,22 @@ def _antiderivatives(t: NDArray, h: NDArray) -> tuple[NDArray, NDArray, NDArray]
         x2 = x * x
         small = x < _SERIES_LIMIT
         g2 = np.empty_like(x)
-        g3 = np.empty_like(x)
+        g3 = np.empty_like(x) if moment else None
         g2[small] = _series(x2[small], _C2)
-        g3[small] = _series(x2[small], _C3)
+        if moment:
+            g3[small] = _series(x2[small], _C3)
         big = ~small
         if np.any(big):
             xb = x[big]
             qb = 1.0 / (1.0 + xb * xb)
             at = np.arctan(xb)
             g2[big] = (at - xb * qb) / xb ** 3
-            g3[big] = (0.375 * at - 0.375 * xb * qb - 0.25 * xb ** 3 * qb * qb) / xb ** 5
+            if moment:
+                g3[big] = (0.375 * at - 0.375 * xb * qb - 0.25 * xb ** 3 * qb * qb) / xb ** 5
         s = np.sign(t[far])
         r2[far] = -s * g2 / (2.0 * tf ** 3)
-        r3[far] = -s * g3 / tf ** 5
+        if moment:
+            r3[far] = -s * g3 / tf ** 5
     return c, r2, r3
 
 
@@ -159,7 +165,7 @@ def segment_integrals(a: NDArray, b: NDArray, positions: NDArray) -> NDArray:
     """
     a = np.asarray(a, float)[:, None, :]
     b = np.asarray(b, float)[:, None, :]
-    return _integrals(_geometry(a, b, np.asarray(positions, float)[None, :, :]))[0]
+    return _integrals(_geometry(a, b, np.asarray(positions, float)[None, :, :]), False)[0]
 
 
 def pair_integrals(a: NDArray, b: NDArray, p: NDArray) -> NDArray:
@@ -174,26 +180,25 @@ def pair_integrals(a: NDArray, b: NDArray, p: NDArray) -> NDArray:
         Array (P,) of integrals [m^-3].
     """
     return _integrals(_geometry(np.asarray(a, float), np.asarray(b, float),
-                                np.asarray(p, float)))[0]
+                                np.asarray(p, float)), False)[0]
 
 
-def _integrals(g: _Geometry) -> tuple[NDArray, NDArray]:
-    """Return the integrals of 1/d^4 and of 1/d^6 along each pair's segment."""
+def _integrals(g: _Geometry, moment: bool = True) -> tuple[NDArray, NDArray | None]:
+    """Return the integrals of 1/d^4 and (if ``moment``) of 1/d^6 along each segment."""
     h = g.h
     # Both ends in one call: half the numpy calls, which dominate on small problems.
-    c, r2, r3 = _antiderivatives(np.stack([g.t1, g.t2]), np.stack([h, h]))
+    c, r2, r3 = _antiderivatives(np.stack([g.t1, g.t2]), np.stack([h, h]), moment)
     dc = c[1] - c[0]
-    r2a, r2b, r3a, r3b = r2[0], r2[1], r3[0], r3[1]
-    with np.errstate(divide='ignore', invalid='ignore'):
-        big2 = np.where(dc != 0, dc * (np.pi / 4.0) / h ** 3, 0.0)
-        big3 = np.where(dc != 0, dc * (3.0 * np.pi / 16.0) / h ** 5, 0.0)
-        i2 = big2 + (r2b - r2a)
-        i3 = big3 + (r3b - r3a)
     # A threat on the segment itself (h ~ 0 with the foot point inside) costs infinity.
     hit = (h < CONTACT_DISTANCE) & (g.t1 <= CONTACT_DISTANCE) & (g.t2 >= -CONTACT_DISTANCE)
     zero = g.length == 0
-    i2 = np.where(zero, 0.0, np.where(hit, np.inf, i2))
-    i3 = np.where(zero, 0.0, np.where(hit, np.inf, i3))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        big2 = np.where(dc != 0, dc * (np.pi / 4.0) / h ** 3, 0.0)
+        i2 = np.where(zero, 0.0, np.where(hit, np.inf, big2 + (r2[1] - r2[0])))
+        if not moment:
+            return i2, None
+        big3 = np.where(dc != 0, dc * (3.0 * np.pi / 16.0) / h ** 5, 0.0)
+        i3 = np.where(zero, 0.0, np.where(hit, np.inf, big3 + (r3[1] - r3[0])))
     return i2, i3
 
 
@@ -267,6 +272,54 @@ def _pair_gradient(g: _Geometry, f: NDArray) -> tuple[NDArray, NDArray, NDArray]
     return i2 * f, da, db
 
 
+def _dense_gradient(a: NDArray, b: NDArray, positions: NDArray, f: NDArray
+                    ) -> tuple[float, NDArray, NDArray]:
+    """J_R and its gradient at segment starts and ends, every segment with every threat.
+
+    The same mathematics as _pair_gradient, with the sums over threats of the D terms
+    written as matrix products (D = a - p - t1 u), so no (S, N, 3) array is formed: this
+    runs inside the optimiser's every evaluation.
+    """
+    d = b - a
+    length = np.sqrt(np.einsum('sk,sk->s', d, d))
+    ok = length > 0
+    inv_l = np.where(ok, 1.0 / np.where(ok, length, 1.0), 0.0)
+    u = d * inv_l[:, None]
+    ex = a[:, 0:1] - positions[None, :, 0]
+    ey = a[:, 1:2] - positions[None, :, 1]
+    ez = a[:, 2:3] - positions[None, :, 2]
+    ux, uy, uz = u[:, 0:1], u[:, 1:2], u[:, 2:3]
+    t1 = ex * ux + ey * uy + ez * uz
+    cx = ey * uz - ez * uy
+    cy = ez * ux - ex * uz
+    cz = ex * uy - ey * ux
+    h = np.sqrt(cx * cx + cy * cy + cz * cz)
+    lcol = length[:, None]
+    g = _Geometry(np.broadcast_to(lcol, h.shape), None, t1, t1 + lcol, h, None)
+    i2, i3 = _integrals(g)
+    j_r = float((i2 @ f).sum())
+    if not np.isfinite(j_r):
+        zero = np.zeros_like(a)
+        return j_r, zero, zero
+    okc = ok[:, None]
+    il = inv_l[:, None]
+    phi_a = np.where(okc, f / (ex * ex + ey * ey + ez * ez) ** 2, 0.0)
+    fx, fy, fz = ex + d[:, 0:1], ey + d[:, 1:2], ez + d[:, 2:3]
+    phi_b = np.where(okc, f / (fx * fx + fy * fy + fz * fz) ** 2, 0.0)
+    m0 = i3 * f
+    coef_a = (phi_a - phi_b) * il - 4.0 * m0 * (1.0 + t1 * il)
+    coef_b = (phi_b - phi_a) * il + 4.0 * m0 * t1 * il
+
+    def along_d(coef: NDArray) -> NDArray:
+        # sum_n coef * (a - p_n - t1 u) without forming the (S, N, 3) array
+        return (a * coef.sum(axis=1)[:, None] - coef @ positions
+                - (coef * t1).sum(axis=1)[:, None] * u)
+
+    da = along_d(coef_a) - phi_a.sum(axis=1)[:, None] * u
+    db = along_d(coef_b) + phi_b.sum(axis=1)[:, None] * u
+    return j_r, da, db
+
+
 def threat_cost_and_gradient(points: NDArray, positions: NDArray, intensities: NDArray,
                              pairs: tuple[NDArray, NDArray] | None = None
                              ) -> tuple[float, NDArray]:
@@ -290,10 +343,7 @@ def threat_cost_and_gradient(points: NDArray, positions: NDArray, intensities: N
     if len(positions) == 0:
         return 0.0, grad
     if pairs is None:
-        cost, da, db = _pair_gradient(
-            _geometry(a[:, None, :], b[:, None, :], positions[None, :, :]), f[None, :])
-        j_r = float(cost.sum())
-        da, db = da.sum(axis=1), db.sum(axis=1)
+        j_r, da, db = _dense_gradient(a, b, positions, f)
     else:
         seg, thr = pairs
         cost, da_p, db_p = _pair_gradient(_geometry(a[seg], b[seg], positions[thr]), f[thr])
