@@ -42,6 +42,9 @@ except ImportError:  # pragma: no cover - exercised only without OMPL
     ob = og = ou = None
 
 ROOT = _repo.ROOT
+#: PlannerConfig fields that switch the UAV angle limits off (pitch <= 90, turn <= 180
+#: always hold): the rules OMPL, the grid floor and the reference play by.
+NO_ANGLE_LIMITS = {'max_pitch_deg': 90.0, 'max_turn_deg': 180.0}
 #: Where the shared scenarios and reference.json live.
 SHARED_SCENARIOS = Path('/work/shared/scenarios')
 #: The bundled copies of the small scenarios (no scale*.yaml).

@@ -9,9 +9,11 @@ Usage (from the repository root, with the project's virtualenv)::
 For N = 20, 100, 300, 1000, 3000 and 10000 threats placed uniformly at random (fixed seed)
 in a cube of side ``100 (N / 20)^(1/3)`` m, the density of the 20-threat scenarios, with
 start and goal at opposite corners at mid height, and then for the shared
-``scale1000.yaml`` and ``scale10000.yaml``, a fresh subprocess per problem runs ``plan``
-(``best``, w = 0.5) ``--repeats`` times (fewer once the runs pass 10 s) on a freshly built
-``ThreatField`` and reports:
+``scale1000.yaml`` and ``scale10000.yaml``, a fresh subprocess per problem and variant
+runs ``plan`` (``best``, w = 0.5) ``--repeats`` times (fewer once the runs pass 10 s) on a
+freshly built ``ThreatField``. The variants are ``best`` (the default, with the angle
+limits) and ``best (no angle limits)`` (``max_pitch_deg=90, max_turn_deg=180``, the rules
+OMPL and the grid floor play by). Each measurement reports:
 
 * the median of each stage of ``PlanResult.timings_ms`` and of the wall time of ``plan``;
 * the process's peak resident set size (``VmHWM``) and its growth over the baseline
@@ -42,11 +44,14 @@ QUICK_SIZES = (20, 100, 300, 1000)
 FILES = ('scale1000', 'scale10000')
 SEED = 7
 W = 0.5
+#: Variants measured: label -> PlannerConfig fields on top of method ``best``.
+VARIANTS = {'best': {}, 'best (no angle limits)': bt.NO_ANGLE_LIMITS}
 #: Stop repeating a problem once its runs have taken this long [ms].
 REPEAT_BUDGET_MS = 10_000.0
 
 
-def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: float) -> dict:
+def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: float,
+           variant: str = 'best') -> dict:
     """Measure one problem in this (fresh) process; return the measurements.
 
     Parameters
@@ -61,11 +66,13 @@ def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: floa
         Timed runs (median reported).
     w : float
         Threat weight.
+    variant : str
+        A key of :data:`VARIANTS`.
 
     Returns
     -------
     dict
-        ``n``, ``name``, ``wall_ms``, ``timings_ms`` (median per stage), ``J``,
+        ``n``, ``name``, ``variant``, ``wall_ms``, ``timings_ms`` (median per stage), ``J``,
         ``side_m``, ``baseline_rss_mb``, ``peak_rss_mb``, ``rss_growth_mb``,
         ``tracemalloc_peak_mb``.
     """
@@ -84,7 +91,7 @@ def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: floa
         field, start, goal, box = bt.scale_problem(n, seed)
         name = f'uniform N={n}'
     positions, intensities = field.positions.copy(), field.intensities.copy()
-    config = PlannerConfig(w=w, method='best')
+    config = PlannerConfig(w=w, method='best', **VARIANTS[variant])
     gc.collect()
     rss0 = peak_rss_mb()
     walls, stages, res = [], [], None
@@ -99,6 +106,7 @@ def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: floa
     rss1 = peak_rss_mb()
     keys = list(dict.fromkeys(k for s in stages for k in s))
     j = float(res.cost.J)
+    res_feasible = res.feasible
     del res
     gc.collect()
     fresh = ThreatField.from_arrays(positions, intensities)
@@ -106,7 +114,8 @@ def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: floa
     plan(fresh, start, goal, box, config)
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
-    return {'n': len(positions), 'name': name, 'w': w, 'repeats': len(walls),
+    return {'n': len(positions), 'name': name, 'variant': variant, 'w': w,
+            'repeats': len(walls), 'feasible': bool(res_feasible),
             'wall_ms': statistics.median(walls), 'wall_runs_ms': walls,
             'timings_ms': {k: statistics.median(s.get(k, 0.0) for s in stages) for k in keys},
             'J': j, 'side_m': float(box.hi[0] - box.lo[0]),
@@ -131,9 +140,10 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def _run_worker(extra: list[str], repeats: int, seed: int, w: float) -> dict:
+def _run_worker(extra: list[str], repeats: int, seed: int, w: float, variant: str) -> dict:
     cmd = [sys.executable, str(Path(__file__).resolve()), '--worker', *extra,
-           '--repeats', str(repeats), '--seed', str(seed), '--w', str(w)]
+           '--repeats', str(repeats), '--seed', str(seed), '--w', str(w),
+           '--variant', variant]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if proc.returncode != 0:
         raise RuntimeError(f'worker {" ".join(extra)} failed:\n{proc.stderr[-2000:]}')
@@ -153,19 +163,23 @@ def render_markdown(data: dict) -> str:
     """Render the ``scale.md`` report from the results."""
     rows = data['sizes'] + data['files']
     keys = _stage_keys(rows)
-    head = ['problem', 'N', 'side m', 'runs'] + [k.replace('_ms', ' ms') for k in keys] + [
-        'wall ms', 'J', 'peak RSS MiB', 'RSS growth MiB', 'tracemalloc peak MiB']
-    lines = ['| ' + ' | '.join(head) + ' |', '|---|' + '---:|' * (len(head) - 1)]
+    head = ['problem', 'variant', 'N', 'side m', 'runs']
+    head += [k.replace('_ms', ' ms') for k in keys]
+    head += ['wall ms', 'J', 'feasible', 'peak RSS MiB', 'RSS growth MiB', 'tracemalloc peak MiB']
+    lines = ['| ' + ' | '.join(head) + ' |', '|---|---|' + '---:|' * (len(head) - 2)]
     for r in rows:
         side = r.get('side_m')
-        cells = [r['name'], str(r['n']), f'{side:.0f}' if side else '-',
-                 str(r['repeats'])]
+        cells = [r['name'], r.get('variant', 'best'), str(r['n']),
+                 f'{side:.0f}' if side else '-', str(r['repeats'])]
         cells += [f"{r['timings_ms'].get(k, 0.0):.1f}" for k in keys]
-        cells += [f"{r['wall_ms']:.1f}", f"{r['J']:.2f}", f"{r['peak_rss_mb']:.0f}",
+        cells += [f"{r['wall_ms']:.1f}", f"{r['J']:.2f}", str(r.get('feasible', '-')),
+                  f"{r['peak_rss_mb']:.0f}",
                   f"{r['rss_growth_mb']:.0f}", f"{r['tracemalloc_peak_mb']:.1f}"]
         lines.append('| ' + ' | '.join(cells) + ' |')
     text = (
-        f"`best` (w = {data['w']}), N threats uniform at random (seed {data['seed']}) in a "
+        f"`best` (w = {data['w']}) as the default (angle limits on) and with "
+        '`max_pitch_deg=90, max_turn_deg=180` (no angle limits, the rules of OMPL and the '
+        f"grid floor); N threats uniform at random (seed {data['seed']}) in a "
         "cube of side 100 (N/20)^(1/3) m (the 20-threat scenarios' density), start and goal "
         'at opposite corners at mid height; then the shared scale1000.yaml and '
         'scale10000.yaml. Stage times are `PlanResult.timings_ms`, median of up to '
@@ -186,20 +200,27 @@ def plot(data: dict, path: Path) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    rows = sorted(data['sizes'], key=lambda r: r['n'])
+    every = sorted(data['sizes'], key=lambda r: r['n'])
+    rows = [r for r in every if r.get('variant', 'best') == 'best']
     n = [r['n'] for r in rows]
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 5))
     for k in _stage_keys(rows):
         y = [max(r['timings_ms'].get(k, 0.0), 1e-3) for r in rows]
         ax.plot(n, y, 'o-', lw=2.5 if k == 'total_ms' else 1.2, label=k.replace('_ms', ''))
+    free = [r for r in every if r.get('variant') == 'best (no angle limits)']
+    if free:
+        ax.plot([r['n'] for r in free], [r['timings_ms']['total_ms'] for r in free], 'k--',
+                lw=1.5, label='total, no angle limits')
     for f in data['files']:
-        ax.plot([f['n']], [f['timings_ms']['total_ms']], 'k*', ms=12)
+        ax.plot([f['n']], [f['timings_ms']['total_ms']],
+                'k*' if f.get('variant', 'best') == 'best' else 'kx', ms=12)
     ax.plot([], [], 'k*', label='total, scale*.yaml')
+    ax.plot([], [], 'kx', label='total, scale*.yaml, no angle limits')
     for target_n, ms in ((20, 20.0), (1000, 300.0), (10000, 3000.0)):
         ax.plot([target_n], [ms], 'rv', ms=9)
     ax.plot([], [], 'rv', label='target')
     ax.set(xscale='log', yscale='log', xlabel='threats N', ylabel='ms',
-           title='time per stage (best, w = %.1f)' % data['w'])
+           title='time per stage (best, w = %.1f; lines: default limits)' % data['w'])
     ax.grid(True, which='both', alpha=0.3)
     ax.legend(fontsize=8)
     ax2.plot(n, [r['peak_rss_mb'] for r in rows], 'o-', label='peak RSS (process)')
@@ -227,10 +248,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument('--worker', action='store_true', help=argparse.SUPPRESS)
     p.add_argument('--n', type=int, help=argparse.SUPPRESS)
     p.add_argument('--file', help=argparse.SUPPRESS)
+    p.add_argument('--variant', default='best', choices=list(VARIANTS), help=argparse.SUPPRESS)
+    p.add_argument('--variants', nargs='+', choices=list(VARIANTS), default=list(VARIANTS),
+                   help='variants to measure (default: all)')
     args = p.parse_args(argv)
     repeats = args.repeats or (1 if args.quick else 3)
     if args.worker:
-        print(json.dumps(worker(args.n, args.file, args.seed, repeats, args.w)))
+        out = worker(args.n, args.file, args.seed, repeats, args.w, args.variant)
+        print(json.dumps(out))
         return 0
     sizes = args.sizes or (QUICK_SIZES if args.quick else SIZES)
     files = [f for f in (FILES[:1] if args.quick else FILES)
@@ -238,14 +263,15 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out or (RESULTS / 'quick' if args.quick else RESULTS)
     out.mkdir(parents=True, exist_ok=True)
     data = {'seed': args.seed, 'w': args.w, 'repeats': repeats, 'sizes': [], 'files': []}
-    jobs = [('n', n) for n in sizes] + [('file', f) for f in files]
-    for kind, what in tqdm(jobs, desc='scale', unit='problem', file=sys.stderr):
+    jobs = [(k, x, v) for k, xs in (('n', sizes), ('file', files)) for x in xs
+            for v in args.variants]
+    for kind, what, variant in tqdm(jobs, desc='scale', unit='problem', file=sys.stderr):
         if kind == 'n':
-            r = _run_worker(['--n', str(what)], repeats, args.seed, args.w)
+            r = _run_worker(['--n', str(what)], repeats, args.seed, args.w, variant)
             data['sizes'].append(r)
         else:
             r = _run_worker(['--file', str(args.scenario_dir / f'{what}.yaml')], repeats,
-                            args.seed, args.w)
+                            args.seed, args.w, variant)
             r['name'] = what
             data['files'].append(r)
         (out / 'scale.json').write_text(json.dumps(data, indent=1))

@@ -133,3 +133,41 @@ def test_ompl_planner_uses_our_motion_cost(scenario):
         np.testing.assert_allclose(pts[[0, -1]], [scenario.start, scenario.goal])
         assert r['J'] == path_cost(pts, th.positions, th.intensities, 0.8).J
     assert runs[1]['J'] <= runs[0]['J'] + 1e-12
+
+
+def _case(name, w, n, js, ms=10.0, feasible=True):
+    methods = {k: {'J': j, 'ratio': j / 100.0, 'ms': ms, 'feasible': feasible,
+                   'timings_ms': {'total_ms': ms}} for k, j in js.items()}
+    for k, m in methods.items():
+        if '@' in k:
+            m.update(rel_diff=0.0, motion_calls=100)
+    return {'scenario': name, 'w': w, 'n_threats': n, 'reference': {'J': 100.0, 'seconds': 1.0},
+            'methods': methods}
+
+
+def test_targets_use_like_for_like_variants():
+    rb = importlib.import_module('run_benchmark')
+    box, ref = rb.BOX_PEER, rb.REF_PEER
+    assert rb.OURS[box]['max_pitch_deg'] == 90 and rb.OURS[box]['max_turn_deg'] == 180
+    assert rb.OURS[ref]['confine_to_box'] is False and rb.OURS[ref]['max_turn_deg'] == 180
+    cases = [_case('a', 0.2, 20, {'best': 130.0, box: 110.0, ref: 100.5, 'RRT*@10x': 120.0},
+                   ms=15.0, feasible=False),
+             _case('b', 0.8, 20, {'best': 140.0, box: 125.0, ref: 103.0, 'RRT*@10x': 120.0},
+                   ms=25.0)]
+    scale = {'sizes': [{'n': 20, 'variant': 'best', 'wall_ms': 30.0,
+                        'timings_ms': {'total_ms': 25.0}, 'peak_rss_mb': 100.0},
+                       {'n': 20, 'variant': box, 'wall_ms': 12.0,
+                        'timings_ms': {'total_ms': 10.0}, 'peak_rss_mb': 100.0}],
+             'files': []}
+    rows = {r['target']: r for r in rb.evaluate_targets({'cases': cases}, scale)}
+    med = rows[f'{ref}: median J/ref <= {rb.RATIO_MEDIAN}']
+    assert med['value'] == pytest.approx(1.0175) and med['verdict'] == 'MISS'
+    assert rows[f'{ref}: worst J/ref <= {rb.RATIO_WORST}']['verdict'] == 'PASS'
+    rrt = rows[f'{box} J < RRT*@10x J on every case']
+    assert rrt['verdict'] == 'MISS' and rrt['value'] == pytest.approx(125.0 / 120.0)
+    assert rows['best: path meets its angle limits on every case']['value'] == 1
+    assert rows['best: 20 threats total <= 20 ms (sweep)']['verdict'] == 'MISS'
+    assert rows[f'{box}: 20 threats total <= 20 ms (sweep)']['verdict'] == 'PASS'
+    assert rows[f'{box}: ~20 threats total <= 20 ms (worst benchmark case)']['value'] == 25.0
+    summary = rb.summary_table(cases)
+    assert f'| {ref} | no | none |' in summary and f'| {box} | yes | none |' in summary

@@ -231,6 +231,8 @@ KNOWN_PROBLEMS = {
     'box_1e-6_wide_at_1e7_with_threats': _problem(
         [[1e7 + 5e-7, 1e7 + 5e-7, 1e7 + 1e-7], [1e7 + 5e-7, 1e7 + 5e-7, 1e7 + 1e-7]],
         [1, 1], [1e7] * 3, [1e7 + 1e-6] * 3, [1e7] * 3, [1e7 + 1e-6] * 3),
+    # |goal - start|^2 underflows: resample() returned copies of the start (fixed).
+    'goal_1e-200_from_start': _problem([], [], [0, 0, 0], [0, 1e-200, 0], [0, 0, 0], [1, 1, 1]),
     'huge_intensity': _problem(
         [[0.5, 0.5, 0.5]], [1e306], [0, 0, 0], [1, 1, 1], [0, 0, 0], [1, 1, 1]),
     'start_beyond_float_range': _problem(

@@ -131,7 +131,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
                          connect_timeout=args.timeout, wait=args.timeout, progress=tick)
         if bar is not None:
             bar.close()
-        print(f'{bag.path.name}: published {live.published} messages and '
+        params = 'set the recorded parameters, ' if live.parameters_set else ''
+        print(f'{bag.path.name}: {params}published {live.published} messages and '
               f'{live.parameter_changes} parameter changes to {live.node_name} in '
               f'{live.duration_s:.1f} s (rate {args.rate:g}); {len(live.answers)} plan_info '
               'answers')

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from rcl_interfaces.msg import ParameterEvent
 
 from threat_planner.conversions import (ns_to_stamp, path_from_msg, path_to_msg,
-                                        PLAN_STATUS_NAME, plan_info_values,
+                                        PLAN_STATUS_NAME, plan_info_msg, plan_info_values,
                                         point_from_pose_stamped, pointcloud2_from_threats,
                                         stamp_to_ns, threats_from_pointcloud2,
                                         threats_from_pose_array)
@@ -201,14 +201,12 @@ def record_plan(scenario: Scenario, config: PlannerConfig, target, *,
         rec.write(PARAMETER_EVENTS_TOPIC, event, log_time_ns=t)
 
         # The inputs, as threat_publisher sends them: start, goal, then the picture.
-        start_ns = _now_ns()
-        start = point_from_pose_stamped(_pose_msg(scenario.start, frame, start_ns), frame,
-                                        'start')
-        rec.write('/start', _pose_msg(scenario.start, frame, start_ns), log_time_ns=start_ns)
-        goal_ns = _now_ns()
-        goal = point_from_pose_stamped(_pose_msg(scenario.goal, frame, goal_ns), frame,
-                                       'goal_pose')
-        rec.write('/goal_pose', _pose_msg(scenario.goal, frame, goal_ns), log_time_ns=goal_ns)
+        ends = []
+        for topic, xyz in (('start', scenario.start), ('goal_pose', scenario.goal)):
+            msg = _pose_msg(xyz, frame, _now_ns())
+            rec.write(f'/{topic}', msg, log_time_ns=stamp_to_ns(msg.header.stamp))
+            ends.append(point_from_pose_stamped(msg, frame, topic))
+        start, goal = ends
         cloud_ns = _now_ns()
         stamp = ns_to_stamp(cloud_ns)
         cloud = pointcloud2_from_threats(scenario.threats.positions,
@@ -217,9 +215,20 @@ def record_plan(scenario: Scenario, config: PlannerConfig, target, *,
         positions, intensities = threats_from_pointcloud2(cloud, frame)
         threats = ThreatField.from_arrays(positions, intensities)
 
+        seq = 3  # the node's number of the threats input, after start and goal_pose
         t0 = time.perf_counter()
         queue_ms = 1e-6 * (_now_ns() - cloud_ns)
-        result = plan(threats, start, goal, settings.box, settings.config, progress=progress)
+        try:
+            result = plan(threats, start, goal, settings.box, settings.config,
+                          progress=progress)
+        except (InputError, PlanningError) as exc:
+            # What the node publishes for a plan that fails, then the error as usual.
+            values = input_values(seq, '/threats', stamp, frame, seq, 0, 0, 0)
+            values['error'] = str(exc)
+            rec.write('/plan_info', plan_info_msg(
+                'ERROR', f'plan for input #{seq} (/threats) failed: {exc}', values, stamp),
+                log_time_ns=_now_ns())
+            raise
         t1 = time.perf_counter()
         rec.write('/initial_path', path_to_msg(result.initial_path, frame, stamp),
                   log_time_ns=_now_ns())
@@ -227,8 +236,7 @@ def record_plan(scenario: Scenario, config: PlannerConfig, target, *,
         markers = plan_markers(result, threats, settings.box, frame, stamp)
         messages_ms = 1e3 * (time.perf_counter() - t1)
         rec.write('/network', markers, log_time_ns=_now_ns())
-        seq, received = 3, 3
-        info = plan_done_info(input_values(seq, '/threats', stamp, frame, received, 0, 0, 1),
+        info = plan_done_info(input_values(seq, '/threats', stamp, frame, seq, 0, 0, 1),
                               result, len(threats), stamp, queue_ms, 1e3 * (t1 - t0),
                               messages_ms)
         rec.write('/plan_info', info, log_time_ns=_now_ns())
@@ -340,6 +348,8 @@ class Bag:
         The inputs in time order.
     plans : list of BagPlan
         The ``plan_info`` outputs in time order.
+    initial_parameter_msgs : list
+        The ``rcl_interfaces/msg/Parameter`` messages of the full parameter event.
 
     """
 
@@ -579,7 +589,32 @@ def _seq_offset(bag: Bag) -> int:
 
 @dataclass
 class ReplayRow:
-    """The comparison for one recorded ``plan_info``."""
+    """The comparison for one recorded ``plan_info``.
+
+    Attributes
+    ----------
+    index : int
+        1-based position of the ``plan_info`` in the recording.
+    seq, source, stamp_ns : int, str, int
+        The input it answers: the node's number, topic (or ``'parameters'``), stamp.
+    log_time_ns : int
+        When the ``plan_info`` was recorded.
+    recorded, replayed : str
+        Outcome: ``'OK'``, ``'WARN'``, ``'rejected'`` or ``'failed'``.
+    method : str
+        Method of the re-plan.
+    j_recorded, j_replayed, j_rel : float or None
+        J of both plans and their relative difference.
+    max_dp : float or None
+        Largest distance between corresponding ``path`` points [m].
+    nodes_match : bool or None
+        Whether the ``initial_path`` node sequences (and entry and exit) agree.
+    ok : bool
+        Whether everything agrees within the tolerance.
+    note : str
+        What differs.
+
+    """
 
     index: int
     seq: int
@@ -600,7 +635,20 @@ class ReplayRow:
 
 @dataclass
 class ReplayReport:
-    """Result of :func:`replay_bag`."""
+    """Result of :func:`replay_bag`.
+
+    Attributes
+    ----------
+    bag : Bag
+        The recording.
+    tolerance : float
+        Tolerance used.
+    overrides : dict[str, object]
+        Planner settings used instead of the recorded ones.
+    rows : list of ReplayRow
+        One per recorded ``plan_info``.
+
+    """
 
     bag: Bag
     tolerance: float
@@ -652,9 +700,12 @@ class ReplayReport:
     def summary(self) -> str:
         """One line: how many plans replayed and whether they all matched."""
         n = len(self.rows)
+        skipped = sum(r.replayed == 'skipped' for r in self.rows)
         if self.ok:
+            n -= skipped
             return (f'{n} plan{"s" * (n != 1)} replayed, all within tolerance '
-                    f'{self.tolerance:g}')
+                    f'{self.tolerance:g}' + (f'; {skipped} skipped (threat picture not '
+                                             'in the recording)' if skipped else ''))
         bad = sum(not r.ok for r in self.rows)
         return f'REGRESSION: {bad} of {n} plans differ (tolerance {self.tolerance:g}); ' + \
             self.difference_text()
@@ -789,9 +840,9 @@ def _replay_one(row: ReplayRow, rec: BagPlan, state_reason: Tuple[_State, Option
         row.replayed = 'rejected'
         note = f'refused: {reason}'
     elif state.threats is None:
-        row.ok = False
-        row.replayed = '-'
-        row.note = 'the threat picture was received before the recording started'
+        # Recording switched on at run time: the picture planned through is not in it.
+        row.replayed = 'skipped'
+        row.note = 'its threat picture was received before the recording started'
         return
     else:
         try:
@@ -818,9 +869,29 @@ def _replay_one(row: ReplayRow, rec: BagPlan, state_reason: Tuple[_State, Option
 
 @dataclass
 class LiveResult:
-    """What :func:`play_live` did."""
+    """What :func:`play_live` did.
+
+    Attributes
+    ----------
+    published : int
+        Messages published.
+    parameters_set : bool
+        Whether the recorded parameters were set on the node.
+    parameter_changes : int
+        Recorded parameter changes applied.
+    duration_s : float
+        Time from the first to the last input, plus the wait for the answer [s].
+    answers : list of dict
+        ``plan_info`` values (plus ``level``) the node published for these inputs.
+    last_answered : bool or None
+        Whether the node answered the last input (None: nothing to wait for).
+    namespace, node_name : str
+        Where the inputs went.
+
+    """
 
     published: int
+    parameters_set: bool
     parameter_changes: int
     duration_s: float
     answers: List[Dict[str, str]]
@@ -1005,7 +1076,8 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
                    if (a.get('input_source'), int(a.get('input_stamp_ns', -1))) in ours
                    or (a.get('input_source') == _PARAMETERS and t >= started)]
         published = sum(inp.source != _PARAMETERS for inp in bag.inputs)
-        return LiveResult(published, changes, duration, got, last_answered, ns, node_name)
+        return LiveResult(published, client is not None, changes, duration, got,
+                          last_answered, ns, node_name)
     finally:
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)

@@ -70,7 +70,7 @@ def resample(points: NDArray, n_segments: int) -> NDArray:
     seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
     s = np.concatenate([[0.0], np.cumsum(seg)])
     if s[-1] == 0:
-        return np.repeat(points[:1], n_segments + 1, axis=0)
+        return np.concatenate([np.repeat(points[:1], n_segments, axis=0), points[-1:]])
     q = np.linspace(0.0, s[-1], n_segments + 1)
     out = np.stack([np.interp(q, s, points[:, k]) for k in range(3)], axis=1)
     out[0], out[-1] = points[0], points[-1]
