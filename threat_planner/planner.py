@@ -37,6 +37,10 @@ K_SWEEP = tuple(range(500, 3001, 100))
 #: Segments and stopping tolerance of the coarse screening minimisation ('best').
 COARSE_SEGMENTS = 8
 COARSE_TOLERANCE = 1e-4
+#: Largest (segment, threat) pairs per optimiser evaluation counted in full.
+OPTIMISER_DENSE_PAIRS = 100_000
+#: Optimiser cut-off beyond that, in typical threat spacings.
+OPTIMISER_CUTOFF_SPACINGS = 5.0
 #: Screened basins refined, best first, until one meets the angle limits ('best').
 FEASIBILITY_TRIES = 3
 
@@ -281,7 +285,8 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
     lengths = network.edge_lengths
     edge_j: EdgeCosts | None = None
     if config.method != 'paper':
-        edge_j = edge_threat_costs(network, threats, threats.typical_spacing(box))
+        edge_j = edge_threat_costs(network, threats, threats.typical_spacing(box),
+                                   volume=float(np.prod(box.hi - box.lo)))
     clock.lap('edge_costs_ms')
 
     def smooth_seq(seq: list[int], k: float) -> _Candidate:
@@ -306,7 +311,7 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
     elif config.method == 'improved':
         entries = nearest_nodes(network, s, config.entry_candidates)
         exits = nearest_nodes(network, t, config.entry_candidates)
-        weights = w * edge_j.threat + (1.0 - w) * lengths
+        weights = edge_j.weights(lengths, w)
         routes = dijkstra_pairs(network, weights, entries, exits)
         clock.lap('search_ms')
         best = None
@@ -321,15 +326,15 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
     else:
         entries = nearest_nodes(network, s, config.entry_candidates)
         exits = nearest_nodes(network, t, config.entry_candidates)
-        weights = w * edge_j.threat + (1.0 - w) * lengths
+        weights = edge_j.weights(lengths, w)
         legs_s, _ = segment_costs(np.repeat(s[None], len(entries), 0), network.nodes[entries],
                                   threats, edge_j.radius)
         legs_t, _ = segment_costs(network.nodes[exits], np.repeat(t[None], len(exits), 0),
                                   threats, edge_j.radius)
         len_s = np.linalg.norm(network.nodes[entries] - s, axis=1)
         len_t = np.linalg.norm(network.nodes[exits] - t, axis=1)
-        routes = alternative_routes(network, weights, w * legs_s + (1 - w) * len_s, entries,
-                                    w * legs_t + (1 - w) * len_t, exits, config.routes)
+        routes = alternative_routes(network, weights, edge_j.combine(legs_s, len_s, w), entries,
+                                    edge_j.combine(legs_t, len_t, w), exits, config.routes)
         clock.lap('search_ms')
         if not config.optimise:
             best = smooth_seq(routes[0], config.k)
@@ -349,8 +354,7 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
         clock.lap('k_sweep_ms')
 
     if config.method == 'best' and config.optimise:
-        best = _optimise_routes(routes, network, s, t, threats, box, config, edge_j,
-                                clock)
+        best = _optimise_routes(routes, network, s, t, threats, box, config, clock)
 
     timings = dict(clock.ms)
     timings['total_ms'] = float(sum(clock.ms.values()))
@@ -366,9 +370,22 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
         edge_cutoff=None if edge_j is None else edge_j.radius, timings_ms=timings)
 
 
+def _optimiser_cutoff(segments: int, threats: ThreatField, spacing: float) -> float | None:
+    """Cut-off radius for a minimisation over ``segments`` segments, None to count all.
+
+    Every threat is counted while that costs at most OPTIMISER_DENSE_PAIRS pairs per
+    evaluation. Beyond, far threats are dropped: a much wider radius than the edge costs'
+    because the optimiser follows the gradient, which a cut-off distorts, into places the
+    Dijkstra route never went.
+    """
+    if segments * len(threats) <= OPTIMISER_DENSE_PAIRS:
+        return None
+    return OPTIMISER_CUTOFF_SPACINGS * spacing
+
+
 def _optimise_routes(routes: list[list[int]], network: Network, s: NDArray, t: NDArray,
                      threats: ThreatField, box: Box, config: PlannerConfig,
-                     edge_j: EdgeCosts, clock: _Clock) -> _Candidate:
+                     clock: _Clock) -> _Candidate:
     """Screen every route and the straight line coarsely, then refine the lowest-J one.
 
     Each route lies in its own basin of J (it passes the threats on its own sides); a cheap
@@ -376,7 +393,7 @@ def _optimise_routes(routes: list[list[int]], network: Network, s: NDArray, t: N
     """
     w = config.w
     bounds = box if config.confine_to_box else None
-    cutoff = None if edge_j.radius is None else 1.5 * edge_j.radius
+    spacing = threats.typical_spacing(box)
     f_pos, f_int = threats.positions, threats.intensities
     # The straight line is the other natural start, and wins when length dominates.
     seeds = [(f'route {i}', seq) for i, seq in enumerate(routes)] + [('straight line', [])]
@@ -384,7 +401,8 @@ def _optimise_routes(routes: list[list[int]], network: Network, s: NDArray, t: N
     for name, seq in seeds:
         initial = np.vstack([s, network.nodes[seq], t]) if seq else np.vstack([s, t])
         coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
-                               90.0, 180.0, cutoff=cutoff,
+                               90.0, 180.0, cutoff=_optimiser_cutoff(COARSE_SEGMENTS, threats,
+                                                                     spacing),
                                tolerance=COARSE_TOLERANCE).points
         screened.append((path_cost(coarse, f_pos, f_int, w).J, name, seq, coarse))
     screened.sort(key=lambda item: item[0])
@@ -394,7 +412,8 @@ def _optimise_routes(routes: list[list[int]], network: Network, s: NDArray, t: N
     # a chance (a feasible path beats any infeasible one, then lower J wins).
     for _, name, seq, coarse in screened[:FEASIBILITY_TRIES]:
         opt = minimise_cost(resample(coarse, config.n_points), threats, w, bounds,
-                            config.max_pitch_deg, config.max_turn_deg, cutoff=cutoff)
+                            config.max_pitch_deg, config.max_turn_deg,
+                            cutoff=_optimiser_cutoff(config.n_points, threats, spacing))
         seq = seq or routes[0]   # the line won: report the best route as the initial path
         cand = _Candidate(seq, np.vstack([s, network.nodes[seq], t]), None, None, opt.points,
                           float('nan'), 0, True, path_cost(opt.points, f_pos, f_int, w),

@@ -24,7 +24,7 @@ from threat_planner.threats import ThreatField
 #: Exact (segment x threat) pairs evaluated before edge costs switch to the cut-off.
 DENSE_PAIR_LIMIT = 500_000
 #: Cut-off radius for edge threat costs, in multiples of the threats' typical spacing.
-CUTOFF_SPACINGS = 2.0
+CUTOFF_SPACINGS = 1.5
 
 
 @dataclass(frozen=True)
@@ -36,11 +36,24 @@ class EdgeCosts:
         bound: Largest J_R the cut-off may have left out of each edge, (E,); zeros if
             every threat was counted.
         radius: Cut-off radius used [m], or None when exact.
+        tail_per_metre: Mean-field estimate of what the dropped threats add per metre of
+            edge: threats spread evenly at intensity density rho beyond the radius R add
+            4 pi rho / R per metre. Uniform, so it only restores the balance between
+            length and threat that the cut-off tilts; 0 when exact.
     """
 
     threat: NDArray
     bound: NDArray
     radius: float | None
+    tail_per_metre: float = 0.0
+
+    def combine(self, threat: NDArray, lengths: NDArray, w: float) -> NDArray:
+        """J = w J_R + (1 - w) L of segments costed like these edges (same cut-off)."""
+        return w * (threat + self.tail_per_metre * lengths) + (1.0 - w) * lengths
+
+    def weights(self, lengths: NDArray, w: float) -> NDArray:
+        """Edge weights J for the J-weighted Dijkstra (paper Case 2)."""
+        return self.combine(self.threat, lengths, w)
 
 
 def segment_costs(a: NDArray, b: NDArray, threats: ThreatField,
@@ -64,7 +77,7 @@ def segment_costs(a: NDArray, b: NDArray, threats: ThreatField,
 
 
 def edge_threat_costs(network: Network, threats: ThreatField, box_spacing: float,
-                      exact: bool | None = None) -> EdgeCosts:
+                      exact: bool | None = None, volume: float | None = None) -> EdgeCosts:
     """Threat cost of every network edge (closed form, eq. 17).
 
     Args:
@@ -72,6 +85,7 @@ def edge_threat_costs(network: Network, threats: ThreatField, box_spacing: float
         threats: The threat field.
         box_spacing: Typical threat spacing [m], which scales the cut-off radius.
         exact: Count every threat (True), cut off (False), or decide by problem size (None).
+        volume: Volume the threats fill [m^3], for the cut-off's mean-field tail.
 
     Returns:
         The EdgeCosts.
@@ -82,7 +96,10 @@ def edge_threat_costs(network: Network, threats: ThreatField, box_spacing: float
         exact = len(a) * len(threats) <= DENSE_PAIR_LIMIT
     radius = None if exact else CUTOFF_SPACINGS * box_spacing
     costs, bound = segment_costs(a, b, threats, radius)
-    return EdgeCosts(costs, bound, radius)
+    tail = 0.0
+    if radius is not None and volume:
+        tail = 4.0 * np.pi * threats.total_intensity / volume / radius
+    return EdgeCosts(costs, bound, radius, tail)
 
 
 def nearest_nodes(network: Network, point: NDArray, k: int) -> NDArray:
