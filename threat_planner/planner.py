@@ -38,9 +38,9 @@ K_SWEEP = tuple(range(500, 3001, 100))
 COARSE_SEGMENTS = 8
 COARSE_TOLERANCE = 1e-4
 #: Largest (segment, threat) pairs per optimiser evaluation counted in full.
-OPTIMISER_DENSE_PAIRS = 100_000
+OPTIMISER_DENSE_PAIRS = 20_000
 #: Optimiser cut-off beyond that, in typical threat spacings.
-OPTIMISER_CUTOFF_SPACINGS = 5.0
+OPTIMISER_CUTOFF_SPACINGS = 3.0
 #: Screened basins refined, best first, until one meets the angle limits ('best').
 FEASIBILITY_TRIES = 3
 
