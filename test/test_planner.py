@@ -59,11 +59,20 @@ def test_every_method_gives_a_valid_plan(uniform, method):
 
 def test_best_beats_the_paper_method(uniform):
     for w in (0.2, 0.8):
-        cfg = PlannerConfig(w=w)
-        best = plan(uniform.threats, uniform.start, uniform.goal, uniform.box, cfg)
+        best = plan(uniform.threats, uniform.start, uniform.goal, uniform.box,
+                    PlannerConfig(w=w))
         paper = plan(uniform.threats, uniform.start, uniform.goal, uniform.box,
                      PlannerConfig(w=w, method='paper'))
-        assert best.cost.J < paper.cost.J
+        assert best.feasible
+        if paper.feasible:
+            assert best.cost.J < paper.cost.J
+        # Under the same (no) angle limits, best wins outright.
+        free = dict(max_pitch_deg=90.0, max_turn_deg=180.0)
+        best_free = plan(uniform.threats, uniform.start, uniform.goal, uniform.box,
+                         PlannerConfig(w=w, **free))
+        paper_free = plan(uniform.threats, uniform.start, uniform.goal, uniform.box,
+                          PlannerConfig(w=w, method='paper', **free))
+        assert best_free.cost.J < paper_free.cost.J
 
 
 @pytest.mark.parametrize('name,w', [('uniform20_1', 0.5), ('weak20_0', 0.8),

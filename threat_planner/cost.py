@@ -303,20 +303,24 @@ def _dense_gradient(a: NDArray, b: NDArray, positions: NDArray, f: NDArray
         return j_r, zero, zero
     okc = ok[:, None]
     il = inv_l[:, None]
-    phi_a = np.where(okc, f / (ex * ex + ey * ey + ez * ez) ** 2, 0.0)
-    fx, fy, fz = ex + d[:, 0:1], ey + d[:, 1:2], ez + d[:, 2:3]
-    phi_b = np.where(okc, f / (fx * fx + fy * fy + fz * fz) ** 2, 0.0)
-    m0 = i3 * f
-    coef_a = (phi_a - phi_b) * il - 4.0 * m0 * (1.0 + t1 * il)
-    coef_b = (phi_b - phi_a) * il + 4.0 * m0 * t1 * il
+    # Intensities near the float limit overflow here although J itself did not; the
+    # caller sees J and such a gradient only steers a search that will be refused anyway.
+    with np.errstate(over='ignore', invalid='ignore'):
+        phi_a = np.where(okc, f / (ex * ex + ey * ey + ez * ez) ** 2, 0.0)
+        fx, fy, fz = ex + d[:, 0:1], ey + d[:, 1:2], ez + d[:, 2:3]
+        phi_b = np.where(okc, f / (fx * fx + fy * fy + fz * fz) ** 2, 0.0)
+        m0 = i3 * f
+        coef_a = (phi_a - phi_b) * il - 4.0 * m0 * (1.0 + t1 * il)
+        coef_b = (phi_b - phi_a) * il + 4.0 * m0 * t1 * il
 
     def along_d(coef: NDArray) -> NDArray:
         # sum_n coef * (a - p_n - t1 u) without forming the (S, N, 3) array
         return (a * coef.sum(axis=1)[:, None] - coef @ positions
                 - (coef * t1).sum(axis=1)[:, None] * u)
 
-    da = along_d(coef_a) - phi_a.sum(axis=1)[:, None] * u
-    db = along_d(coef_b) + phi_b.sum(axis=1)[:, None] * u
+    with np.errstate(over='ignore', invalid='ignore'):
+        da = along_d(coef_a) - phi_a.sum(axis=1)[:, None] * u
+        db = along_d(coef_b) + phi_b.sum(axis=1)[:, None] * u
     return j_r, da, db
 
 

@@ -21,12 +21,15 @@ from functools import cached_property
 import networkx as nx
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree, Delaunay
+from scipy.spatial import cKDTree, Delaunay, QhullError
 
+from threat_planner.errors import PlanningError
 from threat_planner.threats import Box
 
 #: Growth of the box, as a fraction of its diagonal, before auxiliary vertices go on it.
 BOX_MARGIN = 0.02
+#: Threats farther than this many box diagonals from the box are left out of the cells.
+FAR_THREAT_DIAGONALS = 10.0
 #: Threat positions closer than this fraction of the box diagonal are one vertex.
 MERGE_TOLERANCE = 1e-7
 
@@ -167,8 +170,12 @@ def build_network(positions: NDArray, box: Box, box_divisions: int = 2) -> Netwo
         The Network.
     """
     diag = box.diagonal
-    threat_pts = merge_duplicates(np.asarray(positions, float).reshape(-1, 3),
-                                  MERGE_TOLERANCE * diag)
+    threat_pts = np.asarray(positions, float).reshape(-1, 3)
+    centre = 0.5 * (box.lo + box.hi)
+    # Threats many box sizes away shape no cell inside the box (the box's own surface
+    # vertices separate them) but can wreck Qhull's precision; they still count in J.
+    near = np.linalg.norm(threat_pts - centre, axis=1) <= FAR_THREAT_DIAGONALS * diag
+    threat_pts = merge_duplicates(threat_pts[near], MERGE_TOLERANCE * diag)
     grown = Box(box.lo - BOX_MARGIN * diag, box.hi + BOX_MARGIN * diag)
     aux = box_surface_points(grown, box_divisions)
     # A lattice on a box is highly co-spherical, which makes the Delaunay cells ambiguous;
@@ -177,7 +184,8 @@ def build_network(positions: NDArray, box: Box, box_divisions: int = 2) -> Netwo
     # Threats that sit on an auxiliary point (or outside the grown box) keep priority.
     keep_aux = cKDTree(threat_pts).query(aux)[0] > MERGE_TOLERANCE * diag \
         if len(threat_pts) else np.ones(len(aux), dtype=bool)
-    return _tetrahedralise(np.concatenate([threat_pts, aux[keep_aux]]), len(threat_pts))
+    return _tetrahedralise(np.concatenate([threat_pts, aux[keep_aux]]), len(threat_pts),
+                           centre)
 
 
 def bare_network(positions: NDArray) -> Network:
@@ -193,11 +201,22 @@ def bare_network(positions: NDArray) -> Network:
     return _tetrahedralise(vertices, len(vertices))
 
 
-def _tetrahedralise(vertices: NDArray, n_threat_vertices: int) -> Network:
+def _tetrahedralise(vertices: NDArray, n_threat_vertices: int,
+                    centre: NDArray | None = None) -> Network:
     """Delaunay cells of the vertices, their incentres and face-adjacency edges."""
-    tri = Delaunay(vertices, qhull_options='Qbb Qc Qz Q12 Qt')
+    # Qhull works in absolute coordinates: a small box far from the origin loses every
+    # digit of its size unless the points are centred first.
+    shift = vertices.mean(axis=0) if centre is None else centre
+    local = vertices - shift
+    try:
+        tri = Delaunay(local, qhull_options='Qbb Qc Qz Q12 Qt')
+    except QhullError as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else 'QhullError'
+        raise PlanningError(f'partition: Qhull cannot tetrahedralise these points ({first})'
+                            ) from None
     tets = tri.simplices.astype(np.int64)
-    nodes, radii = incentres(vertices[tets])
+    nodes, radii = incentres(local[tets])
+    nodes = nodes + shift
     src = np.repeat(np.arange(len(tets)), 4)
     dst = tri.neighbors.reshape(-1)
     mask = dst > src

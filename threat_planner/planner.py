@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
 from threat_planner.cost import Cost, path_cost
-from threat_planner.errors import InputError
+from threat_planner.errors import InputError, PlanningError
 from threat_planner.optimisation import minimise_cost
 from threat_planner.partition import build_network, Network
 from threat_planner.search import (alternative_routes, dijkstra_pairs, edge_threat_costs,
@@ -291,11 +291,18 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
 
     def smooth_seq(seq: list[int], k: float) -> _Candidate:
         initial = np.vstack([s, network.nodes[seq], t])
-        chain = resample(initial, config.n_points)
+        # Network nodes may sit in the box's margin; the chain starts inside the box.
+        chain = box.clip(resample(initial, config.n_points))
         r = smooth(chain, threats.positions, threats.intensities, k, config.damping,
-                   config.mass, config.q, max_steps=config.max_smoothing_steps)
-        pts = box.clip(r.points)
+                   config.mass, config.q, max_steps=config.max_smoothing_steps,
+                   bounds=(box.lo, box.hi))
+        pts = r.points
         c = path_cost(pts, threats.positions, threats.intensities, w)
+        if not np.isfinite(c.J):
+            # The chain came to rest on a threat (pinned there by a wall): the resampled
+            # route itself is the better answer.
+            pts = chain
+            c = path_cost(pts, threats.positions, threats.intensities, w)
         return _Candidate(seq, initial, pts, c, pts, k, r.steps, r.converged, c,
                           check_angles(pts, config.max_pitch_deg, config.max_turn_deg))
 
@@ -356,6 +363,11 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
     if config.method == 'best' and config.optimise:
         best = _optimise_routes(routes, network, s, t, threats, box, config, clock)
 
+    if not np.isfinite(best.cost.J):
+        raise PlanningError(
+            f'cost: no path with a finite J was found (J = {best.cost.J}); the intensities '
+            f'(largest {float(threats.intensities.max(initial=0.0)):.3g}) overflow double '
+            'precision or a threat blocks the way')
     timings = dict(clock.ms)
     timings['total_ms'] = float(sum(clock.ms.values()))
     seq = best.seq

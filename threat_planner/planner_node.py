@@ -166,8 +166,9 @@ _ARRAY_PARAMETERS = frozenset({'bounds', 'start', 'goal'})
 _NO_THREATS = ThreatField.from_arrays(np.zeros((0, 3)), np.zeros(0))
 # A plan that cannot finish within this after shutdown is abandoned (the worker is a
 # daemon thread): a 1000-threat 'best' plan takes tens of seconds and must not hold up
-# SIGTERM.
-_WORKER_JOIN_S = 2.0
+# SIGINT or SIGTERM. Its result would be dropped anyway, so waiting only lets an idle
+# worker end; the node must exit within 1 s of the signal.
+_WORKER_JOIN_S = 0.1
 
 
 # ------------------------------------------------------------------------ settings

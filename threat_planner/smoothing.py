@@ -146,7 +146,7 @@ def chain_forces(x: NDArray, v: NDArray, positions: NDArray, intensities: NDArra
     if len(positions):
         r = x[:, None, :] - positions[None, :, :]                        # eq. 11-12
         d2 = np.einsum('jik,jik->ji', r, r)
-        with np.errstate(divide='ignore', invalid='ignore'):
+        with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
             mag = q * intensities[None, :] / d2 ** 2.5                   # Q F / d^4 / d
         force += np.einsum('ji,jik->jk', np.nan_to_num(mag, posinf=0.0), r)   # eq. 13
     return force
@@ -154,7 +154,8 @@ def chain_forces(x: NDArray, v: NDArray, positions: NDArray, intensities: NDArra
 
 def smooth(points: NDArray, positions: NDArray, intensities: NDArray, k: float,
            damping: float, mass: float, q: float, rest_length: float = 0.0,
-           max_steps: int = 4000, tolerance: float = 1e-4) -> SmoothingResult:
+           max_steps: int = 4000, tolerance: float = 1e-4,
+           bounds: tuple[NDArray, NDArray] | None = None) -> SmoothingResult:
     """Integrate the mass-spring chain to rest (eq. 14).
 
     Integration is semi-implicit Euler with step dt = 0.5 sqrt(M/k), stable for the springs;
@@ -173,6 +174,7 @@ def smooth(points: NDArray, positions: NDArray, intensities: NDArray, k: float,
         rest_length: Spring rest length [m].
         max_steps: Step limit.
         tolerance: Relative move that counts as at rest.
+        bounds: ``(lo, hi)`` walls the masses stay within at every step [m], or None.
 
     Returns:
         The SmoothingResult.
@@ -199,6 +201,12 @@ def smooth(points: NDArray, positions: NDArray, intensities: NDArray, k: float,
             move[too_big] *= (max_move / size[too_big])[:, None]
             v[too_big] = move[too_big] / dt
         x[1:-1] += move[1:-1]
+        if bounds is not None:
+            # Walls, not a clip at the end: a chain pushed out and clipped afterwards can
+            # land on a threat sitting on the boundary.
+            clipped = np.clip(x, bounds[0], bounds[1])
+            v[clipped != x] = 0.0
+            x = clipped
         calm = calm + 1 if float(size.max()) < tolerance * spacing else 0
         if calm >= 10:
             return SmoothingResult(x, step, True)
