@@ -23,6 +23,7 @@ Typical use::
         ...
 """
 
+import contextlib
 import dataclasses
 import datetime
 import functools
@@ -951,7 +952,9 @@ def _iter_strict(path: Path, topics, decoder: _Decoder) -> Iterator[RecordedMess
             yield decoder(schema, channel, message)
 
 
-def _iter_tolerant(path: Path, topics, decoder: _Decoder) -> Iterator[RecordedMessage]:
+@contextlib.contextmanager
+def _records_after_header(path: Path) -> Iterator[Iterator[object]]:
+    """Open an MCAP file as a record stream positioned after its checked header."""
     try:
         stream = open(path, 'rb')
     except OSError as exc:
@@ -964,6 +967,11 @@ def _iter_tolerant(path: Path, topics, decoder: _Decoder) -> Iterator[RecordedMe
             raise RecordingError(f'{path}: not an MCAP file ({_one_line(exc)})') from exc
         if not isinstance(header, Header):
             raise RecordingError(f'{path}: not an MCAP file (no header record)')
+        yield records
+
+
+def _iter_tolerant(path: Path, topics, decoder: _Decoder) -> Iterator[RecordedMessage]:
+    with _records_after_header(path) as records:
         schemas: Dict[int, Schema] = {}
         channels: Dict[int, Channel] = {}
         while True:
@@ -1006,18 +1014,7 @@ def _iter_recording(path: PathLike, tolerant: bool, topics: Optional[Iterable[st
 def _stream_channels(path: Path) -> List[tuple]:
     channels: List[tuple] = []
     schemas: Dict[int, Schema] = {}
-    try:
-        stream = open(path, 'rb')
-    except OSError as exc:
-        raise RecordingError(f'{path}: cannot open ({exc.strerror or exc})') from exc
-    with stream:
-        records = StreamReader(stream, validate_crcs=True).records
-        try:
-            header = next(records)
-        except Exception as exc:  # noqa: B902 - anything but a header means not MCAP
-            raise RecordingError(f'{path}: not an MCAP file ({_one_line(exc)})') from exc
-        if not isinstance(header, Header):
-            raise RecordingError(f'{path}: not an MCAP file (no header record)')
+    with _records_after_header(path) as records:
         while True:
             try:
                 record = next(records)
