@@ -235,7 +235,7 @@ def ours_table(cases: list[dict]) -> str:
     head = ['scenario', 'w', 'N', 'ref J']
     for lab in labels:
         head += [f'{lab} J (ratio)', 'ms'] if lab != 'straight line' else [f'{lab} J (ratio)']
-    head.append('unconfined: out of box [m]')
+    head.append(f'{REF_PEER}: out of box [m]')
     lines = ['| ' + ' | '.join(head) + ' |', '|' + '---|' * 3 + '---:|' * (len(head) - 3)]
     for c in cases:
         m = c['methods']
