@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 import json
+import math
 from pathlib import Path
 import sys
 
@@ -75,7 +76,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     print(f'  network: {result.network.n_nodes} nodes, {result.network.n_edges} edges; '
           f'entry {result.entry}, exit {result.exit}')
     print(f'  initial: J={c0.J:.3f} J_L={c0.J_L:.3f} J_R={c0.J_R:.3f}')
-    print(f'  final:   J={c.J:.3f} J_L={c.J_L:.3f} J_R={c.J_R:.3f} k={result.k:g} '
+    k = f'k={result.k:g} ' if math.isfinite(result.k) else ''
+    print(f'  final:   J={c.J:.3f} J_L={c.J_L:.3f} J_R={c.J_R:.3f} {k}'
           f'feasible={result.feasible} (pitch {result.angles.max_pitch_deg:.1f} deg, '
           f'turn {result.angles.max_turn_deg:.1f} deg)')
     print(f'  time: {result.timings_ms["total_ms"]:.1f} ms ({stages} ms)')

@@ -184,7 +184,8 @@ class PlanResult:
             'entry': self.entry,
             'exit': self.exit,
             'node_sequence': self.node_sequence,
-            'k': self.k,
+            # 'best' minimises J directly: no spring, no k (null rather than NaN in JSON).
+            'k': self.k if np.isfinite(self.k) else None,
             'seed': self.seed,
             'feasible': self.feasible,
             'angles': {'max_pitch_deg': self.angles.max_pitch_deg,
