@@ -14,7 +14,7 @@ Three methods:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 import time
 from typing import Callable
 
@@ -439,8 +439,3 @@ def _optimise_routes(routes: list[list[int]], network: Network, s: NDArray, t: N
             break
     clock.lap('optimisation_ms')
     return best
-
-
-def with_overrides(config: PlannerConfig, **changes: object) -> PlannerConfig:
-    """Return a copy of config with the non-None changes applied and validated."""
-    return replace(config, **{k: v for k, v in changes.items() if v is not None}).validated()
