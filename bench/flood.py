@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 import signal
 import sys
@@ -190,7 +191,7 @@ class Sampler:
         return self.samples
 
     def values(self) -> list:
-        """The sampled values, without their times, leaving out None."""
+        """Return the sampled values, without their times, leaving out None."""
         return [v for _, v in list(self.samples) if v is not None]
 
     def _loop(self) -> None:
@@ -229,6 +230,11 @@ def scenario_params(scenario: Scenario, **extra) -> dict:
               'frame_id': scenario.frame_id}
     params.update(extra)
     return params
+
+
+def load_average() -> float:
+    """Return the host's 1-minute load average (other jobs share the CPUs)."""
+    return os.getloadavg()[0]
 
 
 def write_results(stem: str, data: dict, markdown: str) -> None:
@@ -325,6 +331,7 @@ def run_flood(client: RosClient, scenario: Scenario, rate: float, seconds: float
     plans = [(t, i) for t, i in answered if i['level'] != 'ERROR']
     errors = [i['message'] for _, i in answered if i['level'] == 'ERROR']
     lags = [1e3 * (t - sent_at[int(i['input_stamp_ns'])]) for t, i in plans]
+    plan_ms = [float(i['plan_wall_ms']) for _, i in plans]
     behind = [sum(1 for s in sent_at.values() if s <= t) - 1
               - (int(i['input_stamp_ns']) - STAMP0_NS) // 10**6 for t, i in plans]
     flood_plans = [t for t, _ in plans if t <= t_end]
@@ -336,9 +343,11 @@ def run_flood(client: RosClient, scenario: Scenario, rate: float, seconds: float
         'inputs_received': received,
         'inputs_skipped': int(last_info['inputs_skipped']),
         'inputs_rejected': int(last_info['inputs_rejected']),
-        'plans_completed': len(plans), 'errors': errors,
+        'plans_completed': int(last_info['plans_completed']) - 1,  # the node's count
+        'plans_observed': len(plans), 'errors': errors,
         'plan_rate_hz': len(flood_plans) / (t_end - t0),
-        'lag_ms': stats(lags), 'inputs_behind': stats(behind),
+        'lag_ms': stats(lags), 'plan_wall_ms': stats(plan_ms),
+        'inputs_behind': stats(behind),
         'last_plan_answers_last_input': bool(plans)
         and int(plans[-1][1]['input_stamp_ns']) == last_ns
         and stamp_to_ns(final_path.header.stamp) == last_ns,
@@ -350,7 +359,7 @@ def run_flood(client: RosClient, scenario: Scenario, rate: float, seconds: float
         'param_get_ms': stats(gets.values()),
         'param_get_timeouts': sum(1 for v in gets.values() if v == float('inf')),
         'rss': memory_summary(rss.values()),
-        'alive_after': alive, 'exit_code': code,
+        'alive_after': alive, 'exit_code': code, 'load_average': load_average(),
     }
 
 
@@ -369,6 +378,8 @@ def markdown(r: dict) -> str:
         f"| plans published / inputs coalesced (skipped) | {r['plans_completed']} / "
         f"{r['inputs_skipped']} |",
         f"| plan rate during the flood | {r['plan_rate_hz']:.2f} Hz |",
+        f"| planner time per plan, median / p95 / max | {r['plan_wall_ms']['median']:.0f} / "
+        f"{r['plan_wall_ms']['p95']:.0f} / {r['plan_wall_ms']['max']:.0f} ms |",
         f"| lag publish -> plan_info, median / p95 / max | {lag['median']:.0f} / "
         f"{lag['p95']:.0f} / {lag['max']:.0f} ms |",
         f"| newer inputs already sent when a plan arrived, median / max | "
@@ -383,6 +394,8 @@ def markdown(r: dict) -> str:
         f"| RSS growth end / max vs start | {mem['growth_pct']:+.1f} % / "
         f"{mem['max_growth_pct']:+.1f} % |",
         f"| node alive, exit code after SIGINT | {r['alive_after']}, {r['exit_code']} |",
+        f"| host load average (1 min, at the end; {os.cpu_count()} CPUs) | "
+        f"{r['load_average']:.1f} |",
     ])
 
 

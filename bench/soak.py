@@ -31,8 +31,8 @@ import time
 from typing import Optional
 
 import flood  # noqa: F401  (puts test/ and the repository root on sys.path)
-from flood import (memory_summary, ParameterProbe, rss_kib, Sampler, scenario_params,
-                   stats, write_results)
+from flood import (load_average, memory_summary, ParameterProbe, rss_kib, Sampler,
+                   scenario_params, stats, write_results)
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: I100
 from node_harness import (cloud, domain_id, info, planner_command, RosClient,
                           start_process)
@@ -175,6 +175,7 @@ def soak(minutes: float, rate: float, scenario_path: Path, drift: float, depth: 
         'rss_after_1min': memory_summary(rss_values[60:]) if len(rss_values) > 120 else None,
         'param_get_ms': stats(gets.values()),
         'alive_after': alive, 'exit_code': code, 'sigint_exit_s': exit_s,
+        'load_average': load_average(),
     }
 
 
@@ -215,6 +216,8 @@ def markdown(r: dict) -> str:
         f"| SIGINT -> exit / exit code | {1e3 * r['sigint_exit_s']:.0f} ms / "
         f"{r['exit_code']} |",
     ]
+    if 'load_average' in r:
+        lines.append(f"| host load average (1 min, at the end) | {r['load_average']:.1f} |")
     return '\n'.join(lines)
 
 

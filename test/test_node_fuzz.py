@@ -7,7 +7,8 @@ good PoseArrays, starts and goals, and bad ones (truncated or extended data, wro
 point_step or row_step, missing, duplicated, overlapping, multi-count or integer fields,
 huge offsets and sizes, a 10^6-point cloud, other frame ids, NaN/inf positions and poses,
 zero or negative intensities, too many threats, start or goal outside the box or on a
-threat), plus random field layouts and byte-flipped clouds whose fate an oracle decides.
+threat), plus random field layouts, byte-flipped clouds and extreme values (threats 1e30 m
+away, intensities 1e-45 or 3.4e38) whose fate an oracle decides.
 
 The oracle is the node's own validation run in this process on the same state (the node
 is a process boundary away, so this checks transport and the node's bookkeeping), and for
@@ -21,7 +22,10 @@ coalesced and every one must get its own ``plan_info``:
 * a bad input: status ERROR with the reason, the node still alive;
 * every 25 inputs and at the end: the process is alive and its parameter service answers.
 
-At the end the recording must hold every input, by stamp. Set ``THREAT_PLANNER_RESULTS``
+An accepted 'either' picture may still fail to plan (a threat 1e20 m or more outside the
+box makes scipy's Qhull fail in the partition): that is an ERROR answer too, counted
+apart as ``accepted_but_not_planned``. At the end the recording must hold every input,
+by stamp. Set ``THREAT_PLANNER_RESULTS``
 to a folder to also write the counts there as ``reliability_fuzz.json``; ``FUZZ_SEED``
 and ``FUZZ_MESSAGES`` draw other or longer sequences.
 """
@@ -90,6 +94,10 @@ class Model:
     start: NDArray
     goal: NDArray
     threats: Optional[ThreatField] = None
+    #: The picture came from an 'either' case (garbage or extreme values): the library may
+    #: fail to plan it (see the module docstring), so later starts and goals count as
+    #: 'either' too until a good picture replaces it.
+    exotic: bool = False
 
 
 @dataclass
@@ -124,7 +132,7 @@ def oracle(case: Case, model: Model) -> None:
                                                                  DEFAULT_INTENSITY)
             threats = ThreatField.from_arrays(positions, intensities)
             check_endpoints(model.start, model.goal, BOX, threats)
-            case.after = replace(model, threats=threats)
+            case.after = replace(model, threats=threats, exotic=case.intent == 'either')
         else:
             name = 'start' if case.topic == 'start' else 'goal_pose'
             point = point_from_pose_stamped(msg, FRAME, name)
@@ -619,6 +627,8 @@ def test_fuzzed_inputs_are_each_answered(client, tmp_path):
     try:
         for k, make in enumerate(draw_cases(N_MESSAGES, SEED)):
             case = make(model)
+            if model.exotic and case.topic in ('start', 'goal_pose'):
+                case.intent = 'either'
             oracle(case, model)
             if case.intent == 'good':
                 assert case.accept, (case.label, case.reason)
@@ -655,7 +665,7 @@ def test_fuzzed_inputs_are_each_answered(client, tmp_path):
                 planned_model = case.after
                 model = case.after
                 if values is None or values['level'] == 'ERROR':
-                    what = (case.label, k, values and values['message'])
+                    what = (case.label, k, values and values['message'][:200])
                     if case.intent == 'good':
                         tally.good_without_plan.append(what)
                     else:

@@ -316,37 +316,36 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
         clock.lap('search_ms')
         best = smooth_seq(seq[(entry, exit_)][0], config.k)
         clock.lap('smoothing_ms')
-    elif config.method == 'improved':
-        entries = nearest_nodes(network, s, config.entry_candidates)
-        exits = nearest_nodes(network, t, config.entry_candidates)
-        weights = edge_j.weights(lengths, w)
-        routes = dijkstra_pairs(network, weights, entries, exits)
-        clock.lap('search_ms')
-        best = None
-        for n_done, (pair, (seq, _)) in enumerate(routes.items(), 1):
-            cand = smooth_seq(seq, config.k)
-            candidates[pair] = cand.cost.J
-            if best is None or cand.cost.J < best.cost.J:
-                best = cand
-            if progress:
-                progress(n_done, len(routes) + len(K_SWEEP))
-        clock.lap('smoothing_ms')
     else:
         entries = nearest_nodes(network, s, config.entry_candidates)
         exits = nearest_nodes(network, t, config.entry_candidates)
         weights = edge_j.weights(lengths, w)
-        legs_s, _ = segment_costs(np.repeat(s[None], len(entries), 0), network.nodes[entries],
-                                  threats, edge_j.radius)
-        legs_t, _ = segment_costs(network.nodes[exits], np.repeat(t[None], len(exits), 0),
-                                  threats, edge_j.radius)
-        len_s = np.linalg.norm(network.nodes[entries] - s, axis=1)
-        len_t = np.linalg.norm(network.nodes[exits] - t, axis=1)
-        routes = alternative_routes(network, weights, edge_j.combine(legs_s, len_s, w), entries,
-                                    edge_j.combine(legs_t, len_t, w), exits, config.routes)
-        clock.lap('search_ms')
-        if not config.optimise:
-            best = smooth_seq(routes[0], config.k)
+        if config.method == 'improved':
+            routes = dijkstra_pairs(network, weights, entries, exits)
+            clock.lap('search_ms')
+            best = None
+            for n_done, (pair, (seq, _)) in enumerate(routes.items(), 1):
+                cand = smooth_seq(seq, config.k)
+                candidates[pair] = cand.cost.J
+                if best is None or cand.cost.J < best.cost.J:
+                    best = cand
+                if progress:
+                    progress(n_done, len(routes) + len(K_SWEEP))
             clock.lap('smoothing_ms')
+        else:
+            legs_s, _ = segment_costs(np.repeat(s[None], len(entries), 0),
+                                      network.nodes[entries], threats, edge_j.radius)
+            legs_t, _ = segment_costs(network.nodes[exits], np.repeat(t[None], len(exits), 0),
+                                      threats, edge_j.radius)
+            len_s = np.linalg.norm(network.nodes[entries] - s, axis=1)
+            len_t = np.linalg.norm(network.nodes[exits] - t, axis=1)
+            routes = alternative_routes(network, weights, edge_j.combine(legs_s, len_s, w),
+                                        entries, edge_j.combine(legs_t, len_t, w), exits,
+                                        config.routes)
+            clock.lap('search_ms')
+            if not config.optimise:
+                best = smooth_seq(routes[0], config.k)
+                clock.lap('smoothing_ms')
 
     if config.method == 'improved' or (config.auto_k and config.method != 'best'):
         feasible_best = best if best.angles.feasible else None
