@@ -200,6 +200,7 @@ def smooth(points: NDArray, positions: NDArray, intensities: NDArray, k: float,
         if np.any(too_big):
             move[too_big] *= (max_move / size[too_big])[:, None]
             v[too_big] = move[too_big] / dt
+        before = x.copy()
         x[1:-1] += move[1:-1]
         if bounds is not None:
             # Walls, not a clip at the end: a chain pushed out and clipped afterwards can
@@ -207,7 +208,9 @@ def smooth(points: NDArray, positions: NDArray, intensities: NDArray, k: float,
             clipped = np.clip(x, bounds[0], bounds[1])
             v[clipped != x] = 0.0
             x = clipped
-        calm = calm + 1 if float(size.max()) < tolerance * spacing else 0
+        # The move that happened: a mass pressed against a wall is at rest.
+        moved = float(np.max(np.abs(x - before)))
+        calm = calm + 1 if moved < tolerance * spacing else 0
         if calm >= 10:
             return SmoothingResult(x, step, True)
     return SmoothingResult(x, max_steps, False)
