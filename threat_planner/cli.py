@@ -25,23 +25,25 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f'{self.prog}: error: {message}\n')
 
 
+#: Command-line options that set the PlannerConfig field of the same meaning.
+_CONFIG_OPTIONS = {'w': 'w', 'method': 'method', 'k': 'k', 'n_points': 'n_points',
+                   'max_pitch': 'max_pitch_deg', 'max_turn': 'max_turn_deg',
+                   'entry_candidates': 'entry_candidates'}
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, object]:
+    """Return the PlannerConfig fields set on the command line (plan, paper, replay)."""
+    out = {field: getattr(args, option) for option, field in _CONFIG_OPTIONS.items()
+           if getattr(args, option, None) is not None}
+    if getattr(args, 'auto_k', False):
+        out['auto_k'] = True
+    if getattr(args, 'leave_box', False):
+        out['confine_to_box'] = False
+    return out
+
+
 def _config_from(args: argparse.Namespace) -> PlannerConfig:
-    cfg = PlannerConfig(w=args.w, method=args.method)
-    if args.k is not None:
-        cfg = replace(cfg, k=args.k)
-    if args.auto_k:
-        cfg = replace(cfg, auto_k=True)
-    if args.n_points is not None:
-        cfg = replace(cfg, n_points=args.n_points)
-    if args.max_pitch is not None:
-        cfg = replace(cfg, max_pitch_deg=args.max_pitch)
-    if args.max_turn is not None:
-        cfg = replace(cfg, max_turn_deg=args.max_turn)
-    if args.entry_candidates is not None:
-        cfg = replace(cfg, entry_candidates=args.entry_candidates)
-    if args.leave_box:
-        cfg = replace(cfg, confine_to_box=False)
-    return cfg.validated()
+    return replace(PlannerConfig(), **_overrides(args)).validated()
 
 
 def _progress_bar(total: int, desc: str):
@@ -114,10 +116,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     from threat_planner.replay import load_bag, play_live, replay_bag
-    overrides = {'w': args.w, 'method': args.method, 'k': args.k, 'n_points': args.n_points,
-                 'max_pitch_deg': args.max_pitch, 'max_turn_deg': args.max_turn,
-                 'entry_candidates': args.entry_candidates}
-    overrides = {k: v for k, v in overrides.items() if v is not None}
+    overrides = _overrides(args)
     bag = load_bag(args.bag, tolerant=args.tolerant)
     if args.live:
         bar = None
