@@ -41,9 +41,9 @@ setup(
     entry_points={
         'console_scripts': [
             'threat-planner = threat_planner.cli:main',
-            'planner_node = threat_planner.planner_node:main',
-            'threat_publisher = threat_planner.threat_publisher:main',
-            'threat_planner_demo = threat_planner.live_demo:main',
+            'planner_node = threat_planner.ros.node:main',
+            'threat_publisher = threat_planner.ros.publisher:main',
+            'threat_planner_demo = threat_planner.ros.demo:main',
         ],
     },
 )

@@ -37,8 +37,8 @@ from node_harness import (cloud, domain_id, info, planner_command, RosClient,  #
 import numpy as np  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
-from threat_planner.conversions import stamp_to_ns  # noqa: E402
-from threat_planner.scenario import load_scenario  # noqa: E402
+from threat_planner.ros.conversions import stamp_to_ns  # noqa: E402
+from threat_planner.core.scenario import load_scenario  # noqa: E402
 
 DEFAULT_SCENARIOS = (REPO / 'test' / 'data' / 'uniform20_0.yaml',
                      REPO / 'test' / 'data' / 'big300_0.yaml',

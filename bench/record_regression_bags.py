@@ -55,8 +55,8 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from node_harness import (domain_id, info, planner_command, PYTHON, RosClient,  # noqa: E402
                           start_process, stop_process)
 
-from threat_planner.replay import load_bag, replay_bag  # noqa: E402
-from threat_planner.scenario import load_scenario  # noqa: E402
+from threat_planner.bag.replay import load_bag, replay_bag  # noqa: E402
+from threat_planner.core.scenario import load_scenario  # noqa: E402
 
 BAGS_DIR = REPO / 'test' / 'data' / 'bags'
 DATA = REPO / 'test' / 'data'
@@ -117,7 +117,7 @@ def record(spec: BagSpec, client: RosClient, work: Path, timeout: float) -> Path
         # The node has opened its recording once it subscribes to its inputs.
         client.wait_until(lambda: client.node.count_subscribers('/threats') > 0, 30.0,
                           'the planner node')
-        cmd = [PYTHON, '-m', 'threat_planner.threat_publisher', '--ros-args',
+        cmd = [PYTHON, '-m', 'threat_planner.ros.publisher', '--ros-args',
                '-p', f'scenario:={spec.scenario}']
         for name, value in spec.publisher.items():
             cmd += ['-p', f'{name}:={value}']

@@ -48,10 +48,10 @@ import bench_tools as bt
 import numpy as np
 from tqdm import tqdm
 
-from threat_planner.cost import path_cost
-from threat_planner.planner import plan, PlannerConfig
-from threat_planner.scenario import load_scenario
-from threat_planner.smoothing import check_angles
+from threat_planner.core.cost import path_cost
+from threat_planner.core.planner import plan, PlannerConfig
+from threat_planner.core.scenario import load_scenario
+from threat_planner.core.smoothing import check_angles
 
 RESULTS = Path(__file__).resolve().parent / 'results'
 WS = (0.2, 0.5, 0.8)

@@ -80,9 +80,9 @@ def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: floa
     import time
     import tracemalloc
 
-    from threat_planner.planner import plan, PlannerConfig
-    from threat_planner.scenario import load_scenario
-    from threat_planner.threats import ThreatField
+    from threat_planner.core.planner import plan, PlannerConfig
+    from threat_planner.core.scenario import load_scenario
+    from threat_planner.core.threats import ThreatField
 
     if scenario:
         sc = load_scenario(scenario)

@@ -31,19 +31,18 @@ import time
 from typing import Optional
 
 import flood  # noqa: F401  (puts test/ and the repository root on sys.path)
-from flood import (load_average, memory_summary, ParameterProbe, rss_kib, Sampler,
-                   scenario_params, stats, write_results)
+from flood import (load_average, memory_summary, ParameterProbe, rss_kib, Sampler, scenario_params,
+                   stats, write_results)
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: I100
-from node_harness import (cloud, domain_id, info, planner_command, RosClient,
-                          start_process)
+from node_harness import (cloud, domain_id, info, planner_command, RosClient, start_process)
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
-from threat_planner.conversions import ns_to_stamp, stamp_to_ns
-from threat_planner.planner_node import THREAT_INPUT
-from threat_planner.recording import read_messages
-from threat_planner.scenario import load_scenario
-from threat_planner.threat_publisher import ThreatDrift
+from threat_planner.ros.conversions import ns_to_stamp, stamp_to_ns
+from threat_planner.ros.node import THREAT_INPUT
+from threat_planner.bag.recording import read_messages
+from threat_planner.core.scenario import load_scenario
+from threat_planner.ros.publisher import ThreatDrift
 
 REPO = flood.REPO
 DEFAULT_SCENARIO = REPO / 'test' / 'data' / 'uniform20_0.yaml'

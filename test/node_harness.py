@@ -26,7 +26,7 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from threat_planner.conversions import plan_info_values, pointcloud2_from_threats
+from threat_planner.ros.conversions import plan_info_values, pointcloud2_from_threats
 
 REPO = Path(__file__).resolve().parents[1]
 PYTHON = sys.executable
@@ -85,7 +85,7 @@ def planner_command(namespace: str = '', params: Optional[dict] = None,
                     params_file: Optional[Path] = REPO / 'config' / 'planner.yaml',
                     executable: Optional[Sequence[str]] = None) -> list[str]:
     """Command line of a planner node with a namespace, a params file and overrides."""
-    cmd = list(executable or [PYTHON, '-m', 'threat_planner.planner_node'])
+    cmd = list(executable or [PYTHON, '-m', 'threat_planner.ros.node'])
     cmd.append('--ros-args')
     if namespace:
         cmd += ['-r', f'__ns:={namespace}']

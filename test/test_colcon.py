@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from node_harness import domain_id, info, REPO, ros_env, RosClient, stop_process
-from threat_planner.conversions import path_from_msg
-from threat_planner.scenario import load_scenario
+from threat_planner.ros.conversions import path_from_msg
+from threat_planner.core.scenario import load_scenario
 
 DOMAIN = domain_id(46)
 COLCON = Path(sys.executable).with_name('colcon')
@@ -75,7 +75,7 @@ def test_sourced_prefix_imports_the_installed_package(install, tmp_path):
     env.pop('PYTHONPATH', None)
     done = subprocess.run(
         ['sh', '-c', '. "$1/local_setup.sh" && exec "$2" -c "$3"', 'sh', str(install),
-         sys.executable, 'import threat_planner.planner_node as m; print(m.__file__)'],
+         sys.executable, 'import threat_planner.ros.node as m; print(m.__file__)'],
         cwd=str(tmp_path), env=env, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().startswith(str(install)), done.stdout

@@ -1,4 +1,4 @@
-"""Tests of threat_planner.conversions against the real ROS 2 message classes."""
+"""Tests of threat_planner.ros.conversions against the real ROS 2 message classes."""
 
 import math
 import time
@@ -13,7 +13,7 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from threat_planner import conversions as conv
+from threat_planner.ros import conversions as conv
 from threat_planner.errors import InputError
 
 FRAME = 'map'

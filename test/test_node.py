@@ -1,6 +1,6 @@
 """Tests of the planner node and the threat publisher over the real ROS 2 middleware.
 
-Each node runs as its own process (``python -m threat_planner.planner_node``) in a
+Each node runs as its own process (``python -m threat_planner.ros.node``) in a
 namespace of this module's ROS domain; this process talks to them through its own rclpy
 context (see node_harness.py). Planner settings are fast ('paper') wherever the result
 itself is not under test; the comparison with the library uses the default 'best'.
@@ -23,18 +23,16 @@ from sensor_msgs.msg import PointCloud2, PointField
 from visualization_msgs.msg import MarkerArray
 import yaml
 
-from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON, REPO,
-                          RosClient, start_process, stop_process, VOLATILE)
-from threat_planner.conversions import (path_from_msg, stamp_to_ns,
-                                        threats_from_pointcloud2)
+from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON, REPO, RosClient,
+                          start_process, stop_process, VOLATILE)
+from threat_planner.ros.conversions import (path_from_msg, stamp_to_ns, threats_from_pointcloud2)
 from threat_planner.errors import InputError
-from threat_planner.planner import plan, PlannerConfig
-from threat_planner.planner_node import (PARAMETER_DEFAULTS, PlanWorker,
-                                         settings_from_parameters)
-from threat_planner.recording import read_messages
-from threat_planner.scenario import load_scenario
-from threat_planner.threat_publisher import ThreatDrift
-from threat_planner.threats import ThreatField
+from threat_planner.core.planner import plan, PlannerConfig
+from threat_planner.ros.node import (PARAMETER_DEFAULTS, PlanWorker, settings_from_parameters)
+from threat_planner.bag.recording import read_messages
+from threat_planner.core.scenario import load_scenario
+from threat_planner.ros.publisher import ThreatDrift
+from threat_planner.core.threats import ThreatField
 
 DOMAIN = domain_id(1)
 SCENARIO_FILE = REPO / 'test' / 'data' / 'uniform20_0.yaml'
@@ -613,7 +611,7 @@ def test_threat_publisher_drives_replanning(fast_node, tmp_path, args, topic, pl
     seq = fast_node.last_seq()
     paths_before = fast_node.client.count(fast_node.topic('path'))
     log = tmp_path / 'publisher.log'
-    cmd = [PYTHON, '-m', 'threat_planner.threat_publisher', '--ros-args', '-r', '__ns:=/fast',
+    cmd = [PYTHON, '-m', 'threat_planner.ros.publisher', '--ros-args', '-r', '__ns:=/fast',
            '-p', f'scenario:={SCENARIO_FILE}']
     for arg in args:
         cmd += ['-p', arg]

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from threat_planner.cost import path_cost
-from threat_planner.optimisation import angle_constraints, minimise_cost
-from threat_planner.smoothing import check_angles, resample
-from threat_planner.threats import Box, ThreatField
+from threat_planner.core.cost import path_cost
+from threat_planner.core.optimisation import angle_constraints, minimise_cost
+from threat_planner.core.smoothing import check_angles, resample
+from threat_planner.core.threats import Box, ThreatField
 
 
 def test_angle_constraint_jacobian_matches_finite_differences():

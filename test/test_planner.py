@@ -6,11 +6,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from threat_planner.cost import path_cost
+from threat_planner.core.cost import path_cost
 from threat_planner.errors import InputError
-from threat_planner.planner import K_SWEEP, plan, PlannerConfig
-from threat_planner.scenario import load_scenario
-from threat_planner.threats import Box, ThreatField
+from threat_planner.core.planner import K_SWEEP, plan, PlannerConfig
+from threat_planner.core.scenario import load_scenario
+from threat_planner.core.threats import Box, ThreatField
 
 DATA = Path(__file__).parent / 'data'
 REFERENCE = json.loads((DATA / 'reference.json').read_text())

@@ -1,4 +1,4 @@
-"""Tests of threat_planner.recording: MCAP files in the ROS 2 profile, read back three ways."""
+"""Tests of threat_planner.bag.recording: MCAP files in the ROS 2 profile, read back three ways."""
 
 import os
 from pathlib import Path
@@ -23,9 +23,9 @@ from sensor_msgs.msg import PointCloud2, PointField
 import yaml
 
 from threat_planner.errors import RecordingError
-from threat_planner.recording import (
-    _build_definition, INPUT_QOS, LATCHED_QOS, McapRecorder, message_definition,
-    msg_dependencies, read_messages, read_ros_messages, TopicQos)
+from threat_planner.bag.recording import (_build_definition, INPUT_QOS, LATCHED_QOS, McapRecorder,
+                                          message_definition, msg_dependencies, read_messages,
+                                          read_ros_messages, TopicQos)
 
 REPO = Path(__file__).resolve().parents[1]
 SEPARATOR = '=' * 80
@@ -399,7 +399,7 @@ def test_time_based_flush_puts_messages_on_disk_while_recording(tmp_path):
 KILLED_WRITER = r"""
 import os, signal, sys, time
 from geometry_msgs.msg import PoseStamped
-from threat_planner.recording import McapRecorder
+from threat_planner.bag.recording import McapRecorder
 
 rec = McapRecorder(sys.argv[1], prefix='killed')   # default chunk size and 1 s flush
 end = time.monotonic() + 2.5

@@ -21,12 +21,12 @@ from nav_msgs.msg import Path as PathMsg
 import pytest
 from sensor_msgs.msg import PointCloud2
 
-from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON, REPO,
-                          ros_env, RosClient, start_process, stop_process, VOLATILE)
+from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON, REPO, ros_env,
+                          RosClient, start_process, stop_process, VOLATILE)
 from threat_planner.errors import RecordingError
-from threat_planner.recording import McapRecorder, read_messages
-from threat_planner.replay import load_bag, replay_bag
-from threat_planner.scenario import load_scenario
+from threat_planner.bag.recording import McapRecorder, read_messages
+from threat_planner.bag.replay import load_bag, replay_bag
+from threat_planner.core.scenario import load_scenario
 
 DOMAIN = domain_id(86, span=3)
 DATA = REPO / 'test' / 'data'

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from threat_planner.smoothing import (chain_forces, check_angles, pitch_angles, resample,
-                                      smooth, turn_angles)
+from threat_planner.core.smoothing import (chain_forces, check_angles, pitch_angles, resample,
+                                           smooth, turn_angles)
 
 
 def test_resample_gives_equal_steps_and_keeps_the_ends():

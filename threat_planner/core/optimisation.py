@@ -17,9 +17,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize
 
-from threat_planner.cost import cost_and_gradient
-from threat_planner.smoothing import check_angles
-from threat_planner.threats import Box, ThreatField
+from threat_planner.core.cost import cost_and_gradient
+from threat_planner.core.smoothing import check_angles
+from threat_planner.core.threats import Box, ThreatField
 
 #: Weight of the even-spacing term relative to the length cost.
 SPACING_WEIGHT = 1e-3

@@ -1,6 +1,6 @@
 """Record offline plans as the node would, and replay recordings as regression tests.
 
-Three jobs, all on the MCAP files :mod:`threat_planner.recording` writes:
+Three jobs, all on the MCAP files :mod:`threat_planner.bag.recording` writes:
 
 * :func:`record_plan` plans a scenario without ROS and records it as a planner node with
   parameter ``record`` set would have: the full parameter set as a
@@ -45,23 +45,21 @@ import numpy as np
 from numpy.typing import NDArray
 from rcl_interfaces.msg import ParameterEvent
 
-from threat_planner.conversions import (ns_to_stamp, path_from_msg, path_to_msg,
-                                        PLAN_STATUS_NAME, plan_info_msg, plan_info_values,
-                                        point_from_pose_stamped, pointcloud2_from_threats,
-                                        stamp_to_ns, threats_from_pointcloud2,
-                                        threats_from_pose_array)
-from threat_planner.errors import (InputError, PlanningError, RecordingError,
-                                   ThreatPlannerError)
-from threat_planner.planner import check_endpoints, plan, PlannerConfig, PlanResult
-from threat_planner.planner_node import (input_values, LATCHED, NODE_NAME, NodeSettings,
-                                         PARAMETER_DEFAULTS, PARAMETER_EVENTS_QOS,
-                                         PARAMETER_EVENTS_TOPIC, plan_done_info,
-                                         plan_markers, POSE_INPUT, settings_from_parameters,
-                                         THREAT_INPUT)
-from threat_planner.recording import (McapRecorder, read_ros_messages, RecordedMessage,
-                                      recorded_topics)
-from threat_planner.scenario import Scenario
-from threat_planner.threats import ThreatField
+from threat_planner.ros.conversions import (ns_to_stamp, path_from_msg, path_to_msg,
+                                            PLAN_STATUS_NAME, plan_info_msg, plan_info_values,
+                                            point_from_pose_stamped, pointcloud2_from_threats,
+                                            stamp_to_ns, threats_from_pointcloud2,
+                                            threats_from_pose_array)
+from threat_planner.errors import (InputError, PlanningError, RecordingError, ThreatPlannerError)
+from threat_planner.core.planner import check_endpoints, plan, PlannerConfig, PlanResult
+from threat_planner.ros.node import (input_values, LATCHED, NODE_NAME, NodeSettings,
+                                     PARAMETER_DEFAULTS, PARAMETER_EVENTS_QOS,
+                                     PARAMETER_EVENTS_TOPIC, plan_done_info, plan_markers,
+                                     POSE_INPUT, settings_from_parameters, THREAT_INPUT)
+from threat_planner.bag.recording import (McapRecorder, read_ros_messages, RecordedMessage,
+                                          recorded_topics)
+from threat_planner.core.scenario import Scenario
+from threat_planner.core.threats import ThreatField
 
 __all__ = ['Bag', 'BagInput', 'BagPlan', 'DEFAULT_TOLERANCE', 'LiveResult', 'ReplayReport',
            'ReplayRow', 'load_bag', 'play_live', 'record_plan', 'replay_bag']
@@ -167,7 +165,7 @@ def record_plan(scenario: Scenario, config: PlannerConfig, target, *,
     target : str or os.PathLike
         A ``.mcap`` file, or a folder in which a rosbag2 bag directory is created.
     progress : callable, optional
-        ``progress(done, total)`` for long sweeps, as :func:`threat_planner.planner.plan`.
+        ``progress(done, total)`` for long sweeps, as :func:`threat_planner.core.planner.plan`.
 
     Returns
     -------
@@ -181,7 +179,7 @@ def record_plan(scenario: Scenario, config: PlannerConfig, target, *,
     RecordingError
         If the file cannot be written or ``config`` cannot be expressed as parameters.
     InputError, PlanningError
-        As :func:`threat_planner.planner.plan`.
+        As :func:`threat_planner.core.planner.plan`.
 
     """
     from rclpy.parameter import Parameter

@@ -16,10 +16,10 @@ from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from threat_planner.cost import pair_threat_costs, segment_threat_costs
+from threat_planner.core.cost import pair_threat_costs, segment_threat_costs
 from threat_planner.errors import PlanningError
-from threat_planner.partition import Network
-from threat_planner.threats import ThreatField
+from threat_planner.core.partition import Network
+from threat_planner.core.threats import ThreatField
 
 #: Exact (segment x threat) pairs evaluated before edge costs switch to the cut-off.
 DENSE_PAIR_LIMIT = 500_000

@@ -14,8 +14,8 @@ from pathlib import Path
 import sys
 
 from threat_planner.errors import ThreatPlannerError
-from threat_planner.planner import METHODS, plan, PlannerConfig
-from threat_planner.scenario import load_scenario
+from threat_planner.core.planner import METHODS, plan, PlannerConfig
+from threat_planner.core.scenario import load_scenario
 
 
 class _Parser(argparse.ArgumentParser):
@@ -64,7 +64,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         bar.update(done - bar.n)
 
     if args.record:
-        from threat_planner.replay import record_plan
+        from threat_planner.bag.replay import record_plan
         result, recording = record_plan(scenario, cfg, args.record, progress=progress)
     else:
         result = plan(scenario.threats, scenario.start, scenario.goal, scenario.box, cfg,
@@ -88,7 +88,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     if args.json:
         Path(args.json).write_text(json.dumps(result.summary(), indent=1))
     if args.plot:
-        from threat_planner.figures import plot_plan
+        from threat_planner.cli.figures import plot_plan
         plot_plan(args.plot, scenario.threats, scenario.box, scenario.start, scenario.goal,
                   result.network.nodes, result.network.edges, result.initial_path,
                   result.path, title=f'{scenario.name}: {cfg.method}, w={cfg.w:g}, '
@@ -97,7 +97,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
 
 def _cmd_paper(args: argparse.Namespace) -> int:
-    from threat_planner.reproduction import reproduce, W_SWEEP
+    from threat_planner.cli.reproduction import reproduce, W_SWEEP
     scenario = load_scenario(args.scenario)
     cfg = _config_from(args)
     bar = _progress_bar(3 + len(W_SWEEP), 'paper')
@@ -115,7 +115,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from threat_planner.replay import load_bag, play_live, replay_bag
+    from threat_planner.bag.replay import load_bag, play_live, replay_bag
     overrides = _overrides(args)
     bag = load_bag(args.bag, tolerant=args.tolerant)
     if args.live:

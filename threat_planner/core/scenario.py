@@ -21,8 +21,8 @@ import numpy as np
 import yaml
 
 from threat_planner.errors import InputError, ScenarioError
-from threat_planner.planner import check_endpoints
-from threat_planner.threats import Box, ThreatField
+from threat_planner.core.planner import check_endpoints
+from threat_planner.core.threats import Box, ThreatField
 
 
 @dataclass(frozen=True)

@@ -39,11 +39,11 @@ def _ros_args(params: dict[str, object]) -> list[str]:
 def _children(args: argparse.Namespace) -> list[subprocess.Popen]:
     """Start the planner and the publisher as ``ros2 run`` would start them."""
     env = dict(os.environ, PYTHONUNBUFFERED='1')
-    planner = [sys.executable, '-m', 'threat_planner.planner_node', '--ros-args']
+    planner = [sys.executable, '-m', 'threat_planner.ros.node', '--ros-args']
     if Path(args.params).exists():
         planner += ['--params-file', str(args.params)]
     planner += _ros_args({'method': args.method})[1:]
-    publisher = [sys.executable, '-m', 'threat_planner.threat_publisher'] + _ros_args(
+    publisher = [sys.executable, '-m', 'threat_planner.ros.publisher'] + _ros_args(
         {'scenario': str(args.scenario), 'rate': float(args.rate),
          'drift': float(args.drift)})
     return [subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
@@ -72,11 +72,11 @@ def run(args: argparse.Namespace) -> int:
     from nav_msgs.msg import Path as PathMsg
     from sensor_msgs.msg import PointCloud2
 
-    from threat_planner.conversions import (path_from_msg, plan_info_values,
-                                            threats_from_pointcloud2)
-    from threat_planner.figures import plot_plan
-    from threat_planner.scenario import load_scenario
-    from threat_planner.threats import ThreatField
+    from threat_planner.ros.conversions import (path_from_msg, plan_info_values,
+                                                threats_from_pointcloud2)
+    from threat_planner.cli.figures import plot_plan
+    from threat_planner.core.scenario import load_scenario
+    from threat_planner.core.threats import ThreatField
 
     scenario = load_scenario(args.scenario)
     latched = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree, Delaunay, QhullError
 
 from threat_planner.errors import PlanningError
-from threat_planner.threats import Box
+from threat_planner.core.threats import Box
 
 #: Growth of the box, as a fraction of its diagonal, before auxiliary vertices go on it.
 BOX_MARGIN = 0.02

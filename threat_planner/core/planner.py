@@ -22,14 +22,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
-from threat_planner.cost import Cost, path_cost
+from threat_planner.core.cost import Cost, path_cost
 from threat_planner.errors import InputError, PlanningError
-from threat_planner.optimisation import minimise_cost
-from threat_planner.partition import build_network, Network
-from threat_planner.search import (alternative_routes, dijkstra_pairs, edge_threat_costs,
-                                   EdgeCosts, nearest_nodes, segment_costs)
-from threat_planner.smoothing import AngleCheck, check_angles, resample, smooth
-from threat_planner.threats import as_point, Box, ThreatField
+from threat_planner.core.optimisation import minimise_cost
+from threat_planner.core.partition import build_network, Network
+from threat_planner.core.search import (alternative_routes, dijkstra_pairs, edge_threat_costs,
+                                        EdgeCosts, nearest_nodes, segment_costs)
+from threat_planner.core.smoothing import AngleCheck, check_angles, resample, smooth
+from threat_planner.core.threats import as_point, Box, ThreatField
 
 METHODS = ('paper', 'improved', 'best')
 #: Case 3's k sweep, from the paper: 500 <= k <= 3000 in steps of 100.

@@ -67,14 +67,14 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
 
-from threat_planner.conversions import (network_markers, path_to_msg, plan_info_msg,
-                                        point_from_pose_stamped, stamp_to_ns,
-                                        threats_from_pointcloud2, threats_from_pose_array)
+from threat_planner.ros.conversions import (network_markers, path_to_msg, plan_info_msg,
+                                            point_from_pose_stamped, stamp_to_ns,
+                                            threats_from_pointcloud2, threats_from_pose_array)
 from threat_planner.errors import InputError, PlanningError, RecordingError
-from threat_planner.planner import check_endpoints, plan, PlannerConfig, PlanResult
-from threat_planner.recording import McapRecorder, TopicQos
-from threat_planner.ros_main import run_node
-from threat_planner.threats import as_point, Box, ThreatField
+from threat_planner.core.planner import check_endpoints, plan, PlannerConfig, PlanResult
+from threat_planner.bag.recording import McapRecorder, TopicQos
+from threat_planner.ros.process import run_node
+from threat_planner.core.threats import as_point, Box, ThreatField
 
 __all__ = ['NodeSettings', 'PARAMETER_DEFAULTS', 'PlanWorker', 'ThreatPlannerNode',
            'input_values', 'main', 'plan_done_info', 'plan_markers',

@@ -1,0 +1,5 @@
+import sys
+
+from threat_planner.cli import main
+
+sys.exit(main())
