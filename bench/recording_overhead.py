@@ -45,7 +45,7 @@ from node_harness import (cloud, domain_id, info, planner_command, RosClient,  #
 import numpy as np  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
-from threat_planner.bag.recording import McapRecorder, read_ros_messages  # noqa: E402
+from threat_planner.bag import McapRecorder, read_ros_messages  # noqa: E402
 from threat_planner.core.scenario import load_scenario  # noqa: E402
 
 DEFAULT_SCENARIOS = (REPO / 'test' / 'data' / 'uniform20_0.yaml',

@@ -29,7 +29,7 @@ from threat_planner.ros.conversions import (path_from_msg, stamp_to_ns, threats_
 from threat_planner.errors import InputError
 from threat_planner.core.planner import plan, PlannerConfig
 from threat_planner.ros.node import (PARAMETER_DEFAULTS, PlanWorker, settings_from_parameters)
-from threat_planner.bag.recording import read_messages
+from threat_planner.bag import read_messages
 from threat_planner.core.scenario import load_scenario
 from threat_planner.ros.publisher import ThreatDrift
 from threat_planner.core.threats import ThreatField

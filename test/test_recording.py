@@ -1,4 +1,4 @@
-"""Tests of threat_planner.bag.recording: MCAP files in the ROS 2 profile, read back three ways."""
+"""Tests of the bag writer and reader: MCAP files in the ROS 2 profile, read back three ways."""
 
 import os
 from pathlib import Path
@@ -22,10 +22,10 @@ from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 from sensor_msgs.msg import PointCloud2, PointField
 import yaml
 
+from threat_planner.bag import (INPUT_QOS, LATCHED_QOS, McapRecorder, message_definition,
+                                msg_dependencies, read_messages, read_ros_messages, TopicQos)
+from threat_planner.bag.definitions import _build_definition
 from threat_planner.errors import RecordingError
-from threat_planner.bag.recording import (_build_definition, INPUT_QOS, LATCHED_QOS, McapRecorder,
-                                          message_definition, msg_dependencies, read_messages,
-                                          read_ros_messages, TopicQos)
 
 REPO = Path(__file__).resolve().parents[1]
 SEPARATOR = '=' * 80
@@ -399,7 +399,7 @@ def test_time_based_flush_puts_messages_on_disk_while_recording(tmp_path):
 KILLED_WRITER = r"""
 import os, signal, sys, time
 from geometry_msgs.msg import PoseStamped
-from threat_planner.bag.recording import McapRecorder
+from threat_planner.bag import McapRecorder
 
 rec = McapRecorder(sys.argv[1], prefix='killed')   # default chunk size and 1 s flush
 end = time.monotonic() + 2.5
@@ -538,3 +538,14 @@ def test_rclpy_qos_profiles_are_accepted(tmp_path):
     with open(out, 'rb') as f:
         (channel,) = make_reader(f).get_summary().channels.values()
     assert yaml.safe_load(channel.metadata['offered_qos_profiles']) == [LATCHED_QOS.as_dict()]
+
+
+def test_mcap_can_end_a_chunk():
+    """The crash-safety flush needs mcap's Writer.flush or its private __finalize_chunk.
+
+    If a new mcap release drops both, this fails loudly instead of recordings silently
+    losing their last second on a crash (see threat_planner.bag.writer.end_chunk).
+    """
+    from mcap.writer import Writer
+    assert callable(getattr(Writer, 'flush', None)) or \
+        callable(getattr(Writer, '_Writer__finalize_chunk', None))

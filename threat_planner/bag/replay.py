@@ -1,6 +1,6 @@
 """Record offline plans as the node would, and replay recordings as regression tests.
 
-Three jobs, all on the MCAP files :mod:`threat_planner.bag.recording` writes:
+Three jobs, all on the MCAP files :mod:`threat_planner.bag.writer` writes:
 
 * :func:`record_plan` plans a scenario without ROS and records it as a planner node with
   parameter ``record`` set would have: the full parameter set as a
@@ -56,8 +56,7 @@ from threat_planner.ros.node import (input_values, LATCHED, NODE_NAME, NodeSetti
                                      PARAMETER_DEFAULTS, PARAMETER_EVENTS_QOS,
                                      PARAMETER_EVENTS_TOPIC, plan_done_info, plan_markers,
                                      POSE_INPUT, settings_from_parameters, THREAT_INPUT)
-from threat_planner.bag.recording import (McapRecorder, read_ros_messages, RecordedMessage,
-                                          recorded_topics)
+from threat_planner.bag import (McapRecorder, read_ros_messages, RecordedMessage, recorded_topics)
 from threat_planner.core.scenario import Scenario
 from threat_planner.core.threats import ThreatField
 

@@ -7,14 +7,14 @@ one line on stderr, never a traceback.
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 import json
 import math
 from pathlib import Path
 import sys
 
 from threat_planner.errors import ThreatPlannerError
-from threat_planner.core.planner import METHODS, plan, PlannerConfig
+from threat_planner.cli.options import add_planner_options, config_from, overrides, ProgressBar
+from threat_planner.core.planner import plan
 from threat_planner.core.scenario import load_scenario
 
 
@@ -25,52 +25,17 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f'{self.prog}: error: {message}\n')
 
 
-#: Command-line options that set the PlannerConfig field of the same meaning.
-_CONFIG_OPTIONS = {'w': 'w', 'method': 'method', 'k': 'k', 'n_points': 'n_points',
-                   'max_pitch': 'max_pitch_deg', 'max_turn': 'max_turn_deg',
-                   'entry_candidates': 'entry_candidates'}
-
-
-def _overrides(args: argparse.Namespace) -> dict[str, object]:
-    """Return the PlannerConfig fields set on the command line (plan, paper, replay)."""
-    out = {field: getattr(args, option) for option, field in _CONFIG_OPTIONS.items()
-           if getattr(args, option, None) is not None}
-    if getattr(args, 'auto_k', False):
-        out['auto_k'] = True
-    if getattr(args, 'leave_box', False):
-        out['confine_to_box'] = False
-    return out
-
-
-def _config_from(args: argparse.Namespace) -> PlannerConfig:
-    return replace(PlannerConfig(), **_overrides(args)).validated()
-
-
-def _progress_bar(total: int, desc: str):
-    """Make a tqdm bar on stderr, shown only for sweeps that run for more than a second."""
-    from tqdm import tqdm
-    return tqdm(total=total, desc=desc, delay=1.0, leave=False, file=sys.stderr)
-
-
 def _cmd_plan(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
-    cfg = _config_from(args)
-    bar = None
-
-    def progress(done: int, total: int) -> None:
-        nonlocal bar
-        if bar is None:
-            bar = _progress_bar(total, 'sweep')
-        bar.update(done - bar.n)
-
+    cfg = config_from(args)
+    progress = ProgressBar('sweep')
     if args.record:
         from threat_planner.bag.replay import record_plan
         result, recording = record_plan(scenario, cfg, args.record, progress=progress)
     else:
         result = plan(scenario.threats, scenario.start, scenario.goal, scenario.box, cfg,
                       progress=progress)
-    if bar is not None:
-        bar.close()
+    progress.close()
     c0, c = result.initial_cost, result.cost
     stages = ', '.join(f'{k[:-3]} {v:.1f}' for k, v in result.timings_ms.items()
                        if k != 'total_ms')
@@ -99,14 +64,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 def _cmd_paper(args: argparse.Namespace) -> int:
     from threat_planner.cli.reproduction import reproduce, W_SWEEP
     scenario = load_scenario(args.scenario)
-    cfg = _config_from(args)
-    bar = _progress_bar(3 + len(W_SWEEP), 'paper')
-
-    def tick(label: str) -> None:
-        bar.set_postfix_str(label)
-        bar.update(1)
-
-    tables = reproduce(scenario, args.out, cfg, progress=tick)
+    cfg = config_from(args)
+    bar = ProgressBar('paper', 3 + len(W_SWEEP))
+    tables = reproduce(scenario, args.out, cfg, progress=bar.tick)
     bar.close()
     for name, body in tables.items():
         print(f'## {name}\n\n{body}\n')
@@ -116,22 +76,14 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     from threat_planner.bag.replay import load_bag, play_live, replay_bag
-    overrides = _overrides(args)
+    changes = overrides(args)
     bag = load_bag(args.bag, tolerant=args.tolerant)
     if args.live:
-        bar = None
-
-        def tick(done: int, total: int) -> None:
-            nonlocal bar
-            if bar is None:
-                bar = _progress_bar(total, 'live')
-            bar.update(done - bar.n)
-
+        bar = ProgressBar('live')
         live = play_live(bag, rate=args.rate, namespace=args.namespace,
-                         set_parameters=not args.no_parameters, overrides=overrides,
-                         connect_timeout=args.timeout, wait=args.timeout, progress=tick)
-        if bar is not None:
-            bar.close()
+                         set_parameters=not args.no_parameters, overrides=changes,
+                         connect_timeout=args.timeout, wait=args.timeout, progress=bar)
+        bar.close()
         params = 'set the recorded parameters, ' if live.parameters_set else ''
         print(f'{bag.path.name}: {params}published {live.published} messages and '
               f'{live.parameter_changes} parameter changes to {live.node_name} in '
@@ -145,17 +97,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             print(f'no answer to the last input within {args.timeout:g} s')
             return 1
         return 0
-    bar = None
-
-    def progress(done: int, total: int) -> None:
-        nonlocal bar
-        if bar is None:
-            bar = _progress_bar(total, 'replay')
-        bar.update(done - bar.n)
-
-    report = replay_bag(bag, tolerance=args.tolerance, overrides=overrides, progress=progress)
-    if bar is not None:
-        bar.close()
+    bar = ProgressBar('replay')
+    report = replay_bag(bag, tolerance=args.tolerance, overrides=changes, progress=bar)
+    bar.close()
     print(report.table())
     print(report.summary())
     if args.report:
@@ -171,17 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     def planner_options(p: argparse.ArgumentParser) -> None:
         p.add_argument('scenario', help='scenario YAML file')
-        p.add_argument('--w', type=float, default=0.5, help='threat weight, 0 < w < 1')
-        p.add_argument('--method', choices=METHODS, default='best')
-        p.add_argument('--k', type=float, help='spring coefficient (default 1000)')
-        p.add_argument('--auto-k', action='store_true',
-                       help='sweep k over 500..3000 for least J (Case 3)')
-        p.add_argument('--n-points', type=int, help='path segments (default 40)')
-        p.add_argument('--max-pitch', type=float, help='pitch limit [deg] (default 45)')
-        p.add_argument('--max-turn', type=float, help='turn limit [deg] (default 60)')
-        p.add_argument('--entry-candidates', type=int, help='K entry/exit candidates')
-        p.add_argument('--leave-box', action='store_true',
-                       help='let the optimised path leave the bounds box')
+        add_planner_options(p)
 
     p_plan = sub.add_parser('plan', help='plan one scenario and print a summary')
     planner_options(p_plan)
@@ -212,13 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_replay.add_argument('--tolerant', action='store_true',
                           help='read a recording cut off by a crash up to its last complete '
                                'chunk')
-    p_replay.add_argument('--w', type=float, help='threat weight instead of the recorded one')
-    p_replay.add_argument('--method', choices=METHODS, help='method instead of the recorded one')
-    p_replay.add_argument('--k', type=float, help='spring coefficient instead of the recorded')
-    p_replay.add_argument('--n-points', type=int, help='path segments instead of the recorded')
-    p_replay.add_argument('--max-pitch', type=float, help='pitch limit [deg]')
-    p_replay.add_argument('--max-turn', type=float, help='turn limit [deg]')
-    p_replay.add_argument('--entry-candidates', type=int, help='K entry/exit candidates')
+    add_planner_options(p_replay, recorded=True)
     live = p_replay.add_argument_group('live', 'publish the inputs to a running planner node')
     live.add_argument('--live', action='store_true',
                       help="publish the recorded inputs (and set the recorded parameters) "

@@ -72,7 +72,7 @@ from threat_planner.ros.conversions import (network_markers, path_to_msg, plan_i
                                             threats_from_pointcloud2, threats_from_pose_array)
 from threat_planner.errors import InputError, PlanningError, RecordingError
 from threat_planner.core.planner import check_endpoints, plan, PlannerConfig, PlanResult
-from threat_planner.bag.recording import McapRecorder, TopicQos
+from threat_planner.bag import McapRecorder, TopicQos
 from threat_planner.ros.process import run_node
 from threat_planner.core.threats import as_point, Box, ThreatField
 

@@ -1,0 +1,434 @@
+"""Write ROS 2 messages to MCAP in the ``ros2`` profile: :class:`McapRecorder`.
+
+Crash safety: the chunk in progress is closed and the file flushed at least once every
+``flush_interval_s`` (1 s by default), by a background thread as well as on ``write``.
+A process killed with SIGKILL therefore loses at most the messages of the last
+``flush_interval_s`` (plus the time one chunk takes to compress and write); everything
+before is in complete chunks that :func:`read_messages` with ``tolerant=True`` reads
+back. Only a clean :meth:`McapRecorder.close` (or leaving the ``with`` block) writes the
+summary section that strict reading and indexed tools need.
+
+Typical use::
+
+    with McapRecorder('out.mcap') as rec:
+        rec.add_topic('/planned_path', 'nav_msgs/msg/Path', LATCHED_QOS)
+        rec.write('/planned_path', path_msg, log_time_ns=stamp_ns)
+    for topic, type_name, log_ns, pub_ns, msg in read_messages('out.mcap'):
+        ...
+"""
+
+import dataclasses
+import datetime
+import importlib
+import importlib.metadata
+import logging
+import os
+from pathlib import Path
+import threading
+import time
+from typing import Dict, Optional, Union
+
+from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
+import yaml
+
+from threat_planner.bag.definitions import (canonical_type_name, MESSAGE_ENCODING,
+                                            message_definition, message_type_name, PROFILE,
+                                            SCHEMA_ENCODING, type_description_hash)
+from threat_planner.bag.qos import as_topic_qos, TopicQos
+from threat_planner.errors import RecordingError
+
+__all__ = ['DEFAULT_FLUSH_INTERVAL_S', 'McapRecorder', 'end_chunk']
+
+_LOG = logging.getLogger(__name__)
+
+PathLike = Union[str, os.PathLike]
+
+METADATA_VERSION = 9
+DEFAULT_CHUNK_SIZE = 256 * 1024
+DEFAULT_FLUSH_INTERVAL_S = 1.0
+
+
+def _library_string() -> str:
+    try:
+        ours = importlib.metadata.version('threat_planner')
+    except importlib.metadata.PackageNotFoundError:
+        # Running from a checkout that was never installed.
+        ours = 'dev'
+    return f'threat_planner/{ours} {LIBRARY_IDENTIFIER}'
+
+
+def end_chunk(writer: Writer) -> None:
+    """Write out the chunk in progress, so that it survives a crash.
+
+    mcap 1.x has no public call for this (``Writer.flush`` may come); until it does, the
+    private ``__finalize_chunk`` is used here and only here, and a test fails loudly when
+    neither exists.
+    """
+    public = getattr(writer, 'flush', None)
+    if public is not None:
+        public()
+    else:
+        writer._Writer__finalize_chunk()
+
+
+@dataclasses.dataclass
+class _Topic:
+    type_name: str
+    qos: TopicQos
+    channel_id: int
+    count: int = 0
+
+
+class McapRecorder:
+    """Write ROS 2 messages to an MCAP file (a context manager; always finishes the file).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.mcap`` file to create (overwritten if present), or a folder (an existing
+        directory or a path without the ``.mcap`` suffix) in which a bag directory
+        ``<prefix>_<YYYYmmdd-HHMMSS>/`` is created holding ``<that name>_0.mcap`` and a
+        rosbag2 ``metadata.yaml``.
+    prefix : str
+        Name prefix of the bag directory in folder mode.
+    chunk_size : int
+        Uncompressed bytes after which a chunk is closed regardless of time.
+    flush_interval_s : float or None
+        Longest time a message waits in memory before its chunk is written and the file
+        flushed; this bounds what a SIGKILL loses. ``None`` or ``0`` disables the timer
+        (then only ``chunk_size``, :meth:`flush` and :meth:`close` write chunks).
+
+    Raises
+    ------
+    RecordingError
+        If the file or directory cannot be created.
+
+    """
+
+    def __init__(self, path: PathLike, *, prefix: str = 'threat_planner',
+                 chunk_size: int = DEFAULT_CHUNK_SIZE,
+                 flush_interval_s: Optional[float] = DEFAULT_FLUSH_INTERVAL_S):
+        target = Path(path)
+        self._bag_dir: Optional[Path] = None
+        try:
+            if target.is_dir() or target.suffix.lower() != '.mcap':
+                self._bag_dir = self._make_bag_dir(target, prefix)
+                self._path = self._bag_dir / f'{self._bag_dir.name}_0.mcap'
+            else:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                self._path = target
+            self._stream = open(self._path, 'wb')
+        except OSError as exc:
+            raise RecordingError(f'{path}: cannot create recording: {exc.strerror or exc}') \
+                from exc
+        self._lock = threading.RLock()
+        self._writer = Writer(self._stream, chunk_size=int(chunk_size),
+                              compression=CompressionType.ZSTD)
+        self._writer.start(profile=PROFILE, library=_library_string())
+        self._stream.flush()
+        self._schemas: Dict[str, int] = {}
+        self._topics: Dict[str, _Topic] = {}
+        self._count = 0
+        self._start_ns: Optional[int] = None
+        self._end_ns: Optional[int] = None
+        self._pending = 0
+        self._closed = False
+        self._interval = float(flush_interval_s) if flush_interval_s else 0.0
+        self._last_flush = time.monotonic()
+        self._stop = threading.Event()
+        self._flusher: Optional[threading.Thread] = None
+        if self._interval > 0:
+            # A timer, not only write(), so a topic that goes quiet is still on disk
+            # within one interval.
+            self._flusher = threading.Thread(target=self._flush_loop, daemon=True,
+                                             name=f'mcap-flush-{self._path.name}')
+            self._flusher.start()
+        if self._bag_dir is not None:
+            self._write_metadata()
+
+    @staticmethod
+    def _make_bag_dir(folder: Path, prefix: str) -> Path:
+        folder.mkdir(parents=True, exist_ok=True)
+        stamp = datetime.datetime.now().strftime('%Y%m%d-%H%M%S')
+        for attempt in range(1000):
+            name = f'{prefix}_{stamp}' + (f'_{attempt}' if attempt else '')
+            try:
+                (folder / name).mkdir()
+            except FileExistsError:
+                # Two recorders started in the same second each get their own bag.
+                continue
+            return folder / name
+        raise RecordingError(f'{folder}: no free bag directory name for {prefix}_{stamp}')
+
+    # -- properties -------------------------------------------------------------------
+
+    @property
+    def path(self) -> Path:
+        """Path of the ``.mcap`` file being written."""
+        return self._path
+
+    @property
+    def bag_dir(self) -> Optional[Path]:
+        """The rosbag2 directory in folder mode, else ``None``."""
+        return self._bag_dir
+
+    @property
+    def message_count(self) -> int:
+        """Number of messages written so far."""
+        return self._count
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` has run."""
+        return self._closed
+
+    # -- writing ----------------------------------------------------------------------
+
+    def add_topic(self, topic: str, type_name: str, qos=None) -> None:
+        """Register a topic, its type and offered QoS before (or without) writing to it.
+
+        Parameters
+        ----------
+        topic : str
+            Topic name, e.g. ``/planned_path``.
+        type_name : str
+            ``pkg/msg/Type`` (``pkg/Type`` accepted).
+        qos : TopicQos or rclpy.qos.QoSProfile, optional
+            Offered QoS; :data:`INPUT_QOS` if omitted.
+
+        Raises
+        ------
+        RecordingError
+            If the topic exists with another type, or the type's ``.msg`` is missing.
+
+        """
+        with self._lock:
+            self._check_open()
+            self._topic(topic, canonical_type_name(type_name), qos)
+
+    def write(self, topic: str, msg, type_name: Optional[str] = None,
+              log_time_ns: Optional[int] = None, publish_time_ns: Optional[int] = None,
+              qos=None) -> None:
+        """Append one message, registering its schema and channel on first use.
+
+        Parameters
+        ----------
+        topic : str
+            Topic name.
+        msg : object or bytes
+            An rclpy message (serialised here to CDR) or already serialised CDR bytes.
+        type_name : str, optional
+            ``pkg/msg/Type``; taken from ``msg`` if it is a message object, required
+            for bytes on a topic not yet registered.
+        log_time_ns : int, optional
+            Receive/record time in ns since the epoch; now if omitted.
+        publish_time_ns : int, optional
+            Publish time in ns; ``log_time_ns`` if omitted.
+        qos : TopicQos or rclpy.qos.QoSProfile, optional
+            Offered QoS, used only when this call registers the topic.
+
+        Raises
+        ------
+        RecordingError
+            If the recorder is closed, the type is missing or inconsistent, a time is
+            negative, or the message cannot be serialised.
+
+        """
+        if isinstance(msg, (bytes, bytearray, memoryview)):
+            data = bytes(msg)
+        else:
+            msg_type = message_type_name(msg)
+            if type_name is not None and canonical_type_name(type_name) != msg_type:
+                raise RecordingError(
+                    f'{topic}: message is a {msg_type}, not the given {type_name}')
+            type_name = msg_type
+            data = self._serialize(topic, msg)
+        log_time_ns = time.time_ns() if log_time_ns is None else log_time_ns
+        publish_time_ns = log_time_ns if publish_time_ns is None else publish_time_ns
+        for label, value in (('log_time_ns', log_time_ns), ('publish_time_ns', publish_time_ns)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise RecordingError(f'{topic}: {label} {value!r} is not a non-negative int')
+        with self._lock:
+            self._check_open()
+            entry = self._topics.get(topic)
+            if entry is None:
+                if type_name is None:
+                    raise RecordingError(
+                        f'{topic}: type_name is needed to record bytes on a new topic')
+                entry = self._topic(topic, canonical_type_name(type_name), qos)
+            elif type_name is not None and canonical_type_name(type_name) != entry.type_name:
+                raise RecordingError(
+                    f'{topic}: recorded as {entry.type_name}, cannot add a {type_name}')
+            try:
+                self._writer.add_message(channel_id=entry.channel_id, log_time=log_time_ns,
+                                         data=data, publish_time=publish_time_ns,
+                                         sequence=entry.count + 1)
+            except OSError as exc:
+                # A full chunk is written inside add_message, so the disk shows up here.
+                raise RecordingError(f'{self._path}: cannot write: {exc}') from exc
+            entry.count += 1
+            self._count += 1
+            self._pending += 1
+            self._start_ns = log_time_ns if self._start_ns is None else min(
+                self._start_ns, log_time_ns)
+            self._end_ns = log_time_ns if self._end_ns is None else max(
+                self._end_ns, log_time_ns)
+            if self._interval > 0 and time.monotonic() - self._last_flush >= self._interval:
+                self._flush_locked()
+
+    def flush(self) -> None:
+        """Close the chunk in progress and flush the file (not fsync)."""
+        with self._lock:
+            self._check_open()
+            self._flush_locked()
+
+    def close(self) -> None:
+        """Finish the file (summary, footer) and write ``metadata.yaml``; idempotent.
+
+        Raises
+        ------
+        RecordingError
+            If the file cannot be finished (the stream is closed regardless).
+
+        """
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._stop.set()
+        if self._flusher is not None and self._flusher is not threading.current_thread():
+            self._flusher.join()
+        with self._lock:
+            try:
+                self._writer.finish()
+                self._stream.flush()
+            except (OSError, ValueError) as exc:
+                raise RecordingError(f'{self._path}: cannot finish recording: {exc}') from exc
+            finally:
+                self._stream.close()
+                if self._bag_dir is not None:
+                    self._write_metadata()
+
+    def __enter__(self) -> 'McapRecorder':
+        """Return the recorder itself."""
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        """Close the recorder, also when the block raised."""
+        self.close()
+
+    # -- internals --------------------------------------------------------------------
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RecordingError(f'{self._path}: recorder is closed')
+
+    @staticmethod
+    def _serialize(topic: str, msg) -> bytes:
+        from rclpy.serialization import serialize_message
+        try:
+            return serialize_message(msg)
+        except Exception as exc:  # noqa: B902 - rclpy's C layer raises assorted types
+            raise RecordingError(f'{topic}: cannot serialise {type(msg).__name__}: {exc}') \
+                from exc
+
+    def _topic(self, topic: str, type_name: str, qos) -> _Topic:
+        entry = self._topics.get(topic)
+        if entry is not None:
+            if entry.type_name != type_name:
+                raise RecordingError(
+                    f'{topic}: recorded as {entry.type_name}, cannot add a {type_name}')
+            return entry
+        qos = as_topic_qos(qos)
+        schema_id = self._schemas.get(type_name)
+        if schema_id is None:
+            text = message_definition(type_name)
+            schema_id = self._writer.register_schema(
+                name=type_name, encoding=SCHEMA_ENCODING, data=text.encode('utf-8'))
+            self._schemas[type_name] = schema_id
+        channel_id = self._writer.register_channel(
+            topic=topic, message_encoding=MESSAGE_ENCODING, schema_id=schema_id,
+            metadata={'offered_qos_profiles': qos.to_yaml(),
+                      'topic_type_hash': type_description_hash(type_name)})
+        entry = _Topic(type_name=type_name, qos=qos, channel_id=channel_id)
+        self._topics[topic] = entry
+        return entry
+
+    def _flush_loop(self) -> None:
+        while True:
+            with self._lock:
+                due = self._last_flush + self._interval
+            # Wake exactly when the interval since the last flush (by write() or by this
+            # thread) ends, so no message waits longer than one interval.
+            if self._stop.wait(max(0.0, due - time.monotonic())):
+                return
+            with self._lock:
+                if self._closed:
+                    return
+                if time.monotonic() - self._last_flush >= self._interval:
+                    try:
+                        self._flush_locked()
+                    except RecordingError:
+                        # Disk full or similar: close() reports it; a dying timer thread
+                        # must not take the process down with it.
+                        _LOG.exception('periodic flush of %s failed', self._path)
+                        return
+
+    def _flush_locked(self) -> None:
+        try:
+            if self._pending:
+                end_chunk(self._writer)
+            self._stream.flush()
+        except OSError as exc:
+            raise RecordingError(f'{self._path}: cannot write: {exc}') from exc
+        self._last_flush = time.monotonic()
+        if self._pending and self._bag_dir is not None:
+            # Keeps a killed bag playable with counts up to the last flush.
+            self._write_metadata()
+        self._pending = 0
+
+    def _write_metadata(self) -> None:
+        start = self._start_ns or 0
+        duration = (self._end_ns - self._start_ns) if self._count else 0
+        name = self._path.name
+        info = {
+            'version': METADATA_VERSION,
+            'storage_identifier': 'mcap',
+            'duration': {'nanoseconds': duration},
+            'starting_time': {'nanoseconds_since_epoch': start},
+            'message_count': self._count,
+            'topics_with_message_count': [
+                {
+                    'topic_metadata': {
+                        'name': topic,
+                        'type': entry.type_name,
+                        'serialization_format': MESSAGE_ENCODING,
+                        'offered_qos_profiles': [entry.qos.as_dict()],
+                        'type_description_hash': type_description_hash(entry.type_name),
+                    },
+                    'message_count': entry.count,
+                }
+                for topic, entry in self._topics.items()
+            ],
+            # Chunk compression is internal to MCAP; rosbag2 leaves these empty for it.
+            'compression_format': '',
+            'compression_mode': '',
+            'relative_file_paths': [name],
+            'files': [{
+                'path': name,
+                'starting_time': {'nanoseconds_since_epoch': start},
+                'duration': {'nanoseconds': duration},
+                'message_count': self._count,
+            }],
+            'custom_data': None,
+            'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
+        }
+        text = yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False,
+                              default_flow_style=False)
+        target = self._bag_dir / 'metadata.yaml'
+        tmp = target.with_suffix('.yaml.tmp')
+        try:
+            tmp.write_text(text, encoding='utf-8')
+            os.replace(tmp, target)
+        except OSError as exc:
+            raise RecordingError(f'{target}: cannot write bag metadata: {exc}') from exc

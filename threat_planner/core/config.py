@@ -1,0 +1,66 @@
+"""PlannerConfig: the planner's settings, with defaults and ranges from :mod:`.settings`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from threat_planner.core.settings import PLANNER_SETTINGS
+
+__all__ = ['PlannerConfig']
+
+_D = {name: s.default for name, s in PLANNER_SETTINGS.items()}
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Planner settings; every field has a sensible default.
+
+    The meaning, unit and range of every field are declared once in
+    :data:`threat_planner.core.settings.SETTINGS`.
+
+    Attributes:
+        w: Threat weight in J = w J_R + (1-w) J_L, 0 < w < 1.
+        method: 'paper', 'improved' or 'best'.
+        k: Spring coefficient of the smoothing chain.
+        auto_k: Sweep k over K_SWEEP for least J (Case 3); 'improved' always does.
+        damping: Damping coefficient b between neighbouring masses (eq. 9-10).
+        mass: Mass M of each chain point (eq. 14).
+        q: Repulsion constant Q (eq. 13).
+        n_points: Number of chain segments n (the chain has n+1 points).
+        max_pitch_deg: Pitch limit [deg].
+        max_turn_deg: Turn (steering) limit between consecutive segments [deg].
+        entry_candidates: K nearest nodes tried as entry and as exit (Case 1).
+        routes: Distinct network routes screened by 'best' (plus the straight line).
+        box_divisions: Intervals per box edge of the auxiliary surface lattice.
+        optimise: Run the direct J minimisation ('best' only).
+        confine_to_box: Keep the optimised path inside the flight box; False lets the
+            direct minimisation leave it (the reference yardstick's setting).
+        max_smoothing_steps: Step limit of the chain integration.
+    """
+
+    w: float = _D['w']
+    method: str = _D['method']
+    k: float = _D['k']
+    auto_k: bool = _D['auto_k']
+    damping: float = _D['damping']
+    mass: float = _D['mass']
+    q: float = _D['q']
+    n_points: int = _D['n_points']
+    max_pitch_deg: float = _D['max_pitch_deg']
+    max_turn_deg: float = _D['max_turn_deg']
+    entry_candidates: int = _D['entry_candidates']
+    routes: int = _D['routes']
+    box_divisions: int = _D['box_divisions']
+    optimise: bool = _D['optimise']
+    confine_to_box: bool = _D['confine_to_box']
+    max_smoothing_steps: int = _D['max_smoothing_steps']
+
+    def validated(self) -> 'PlannerConfig':
+        """Return self after checking every field against its declared range.
+
+        Raises:
+            InputError: naming the field and its bad value.
+        """
+        for name, setting in PLANNER_SETTINGS.items():
+            setting.check(getattr(self, name))
+        return self

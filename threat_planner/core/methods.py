@@ -1,0 +1,248 @@
+"""The planner's three methods, each a function of one planning problem.
+
+* ``paper``: the paper as written: length-weighted Dijkstra from the node nearest the start
+  to the node nearest the goal, mass-spring smoothing at a fixed k, angle check.
+* ``improved``: the paper's Cases 1-3 together: Dijkstra on each edge's J (Case 2) for every
+  pair of the K nearest entry and exit nodes (Case 1), the pair of least final J kept, then
+  k swept over 500..3000 step 100 for least J among angle-feasible paths (Case 3).
+* ``best``: one J-weighted Dijkstra with the start and goal joined to K candidates each,
+  several distinct routes plus the straight line screened by a coarse minimisation of J,
+  then the winner refined by L-BFGS-B on J itself within the box and the angle limits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import time
+from typing import Callable, Optional
+
+import numpy as np
+from numpy.typing import NDArray
+
+from threat_planner.core.config import PlannerConfig
+from threat_planner.core.cost import Cost, path_cost
+from threat_planner.core.optimisation import minimise_cost
+from threat_planner.core.partition import Network
+from threat_planner.core.search import (alternative_routes, dijkstra_pairs, EdgeCosts,
+                                        nearest_nodes, segment_costs)
+from threat_planner.core.smoothing import AngleCheck, check_angles, resample, smooth
+from threat_planner.core.threats import Box, ThreatField
+
+__all__ = ['METHOD_FUNCTIONS', 'Candidate', 'Clock', 'Problem', 'K_SWEEP']
+
+#: Case 3's k sweep, from the paper: 500 <= k <= 3000 in steps of 100.
+K_SWEEP = tuple(range(500, 3001, 100))
+#: Segments and stopping tolerance of the coarse screening minimisation ('best').
+COARSE_SEGMENTS = 8
+COARSE_TOLERANCE = 1e-4
+#: Largest (segment, threat) pairs per optimiser evaluation counted in full.
+OPTIMISER_DENSE_PAIRS = 20_000
+#: Optimiser cut-off beyond that, in typical threat spacings.
+OPTIMISER_CUTOFF_SPACINGS = 3.0
+#: Screened basins refined, best first, until one meets the angle limits ('best').
+FEASIBILITY_TRIES = 3
+
+
+class Clock:
+    """Accumulates wall time per named stage."""
+
+    def __init__(self) -> None:
+        self.ms: dict[str, float] = {}
+        self._t0 = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        """Charge the time since the previous lap to `stage`."""
+        now = time.perf_counter()
+        self.ms[stage] = self.ms.get(stage, 0.0) + 1e3 * (now - self._t0)
+        self._t0 = now
+
+
+@dataclass
+class Problem:
+    """One planning problem and what the methods share while solving it."""
+
+    threats: ThreatField
+    s: NDArray
+    t: NDArray
+    box: Box
+    config: PlannerConfig
+    network: Network
+    edge_j: Optional[EdgeCosts]
+    clock: Clock
+    progress: Optional[Callable[[int, int], None]] = None
+    candidates: dict[tuple[int, int], float] = field(default_factory=dict)
+    k_sweep: dict[float, float] = field(default_factory=dict)
+
+    def cost(self, points: NDArray) -> Cost:
+        """Exact J of a path through this problem's threats."""
+        return path_cost(points, self.threats.positions, self.threats.intensities,
+                         self.config.w)
+
+
+@dataclass
+class Candidate:
+    """One path under consideration, from its network route to its final form."""
+
+    seq: list[int]
+    initial: NDArray
+    smoothed: NDArray | None
+    smoothed_cost: Cost | None
+    final: NDArray
+    k: float
+    steps: int
+    converged: bool
+    cost: Cost
+    angles: AngleCheck
+    seed: str = 'route 0'
+
+
+def _smooth_route(p: Problem, seq: list[int], k: float) -> Candidate:
+    """Smooth one network route with spring coefficient k (paper §3.4)."""
+    cfg = p.config
+    initial = np.vstack([p.s, p.network.nodes[seq], p.t])
+    # Network nodes may sit in the box's margin; the chain starts inside the box.
+    chain = p.box.clip(resample(initial, cfg.n_points))
+    r = smooth(chain, p.threats.positions, p.threats.intensities, k, cfg.damping, cfg.mass,
+               cfg.q, max_steps=cfg.max_smoothing_steps, bounds=(p.box.lo, p.box.hi))
+    pts = r.points
+    c = p.cost(pts)
+    if not np.isfinite(c.J):
+        # The chain came to rest on a threat (pinned there by a wall): the resampled
+        # route itself is the better answer.
+        pts = chain
+        c = p.cost(pts)
+    return Candidate(seq=seq, initial=initial, smoothed=pts, smoothed_cost=c, final=pts, k=k,
+                     steps=r.steps, converged=r.converged, cost=c,
+                     angles=check_angles(pts, cfg.max_pitch_deg, cfg.max_turn_deg))
+
+
+def _sweep_k(p: Problem, best: Candidate) -> Candidate:
+    """Case 3: the least-J angle-feasible smoothing of best's route over K_SWEEP."""
+    feasible_best = best if best.angles.feasible else None
+    done = len(p.candidates)
+    for n_done, k in enumerate(K_SWEEP, 1):
+        cand = _smooth_route(p, best.seq, float(k))
+        p.k_sweep[float(k)] = cand.cost.J if cand.angles.feasible else float('inf')
+        if cand.angles.feasible and (feasible_best is None
+                                     or cand.cost.J < feasible_best.cost.J):
+            feasible_best = cand
+        if p.progress:
+            p.progress(done + n_done, done + len(K_SWEEP))
+    p.clock.lap('k_sweep_ms')
+    return feasible_best or best
+
+
+def plan_paper(p: Problem) -> Candidate:
+    """Length-weighted Dijkstra between the nodes nearest S and T, smoothed at k."""
+    entry = int(nearest_nodes(p.network, p.s, 1)[0])
+    exit_ = int(nearest_nodes(p.network, p.t, 1)[0])
+    seq = dijkstra_pairs(p.network, p.network.edge_lengths, np.array([entry]),
+                         np.array([exit_]))
+    p.clock.lap('search_ms')
+    best = _smooth_route(p, seq[(entry, exit_)][0], p.config.k)
+    p.clock.lap('smoothing_ms')
+    return _sweep_k(p, best) if p.config.auto_k else best
+
+
+def plan_improved(p: Problem) -> Candidate:
+    """Cases 1-3: J-weighted Dijkstra per entry/exit pair, least J kept, then the k sweep."""
+    cfg = p.config
+    entries = nearest_nodes(p.network, p.s, cfg.entry_candidates)
+    exits = nearest_nodes(p.network, p.t, cfg.entry_candidates)
+    routes = dijkstra_pairs(p.network, p.edge_j.weights(p.network.edge_lengths, cfg.w),
+                            entries, exits)
+    p.clock.lap('search_ms')
+    best = None
+    for n_done, (pair, (seq, _)) in enumerate(routes.items(), 1):
+        cand = _smooth_route(p, seq, cfg.k)
+        p.candidates[pair] = cand.cost.J
+        if best is None or cand.cost.J < best.cost.J:
+            best = cand
+        if p.progress:
+            p.progress(n_done, len(routes) + len(K_SWEEP))
+    p.clock.lap('smoothing_ms')
+    return _sweep_k(p, best)
+
+
+def plan_best(p: Problem) -> Candidate:
+    """Distinct J-weighted routes and the straight line screened, the best refined on J."""
+    cfg, net, threats = p.config, p.network, p.threats
+    entries = nearest_nodes(net, p.s, cfg.entry_candidates)
+    exits = nearest_nodes(net, p.t, cfg.entry_candidates)
+    legs_s, _ = segment_costs(np.repeat(p.s[None], len(entries), 0), net.nodes[entries],
+                              threats, p.edge_j.radius)
+    legs_t, _ = segment_costs(net.nodes[exits], np.repeat(p.t[None], len(exits), 0),
+                              threats, p.edge_j.radius)
+    len_s = np.linalg.norm(net.nodes[entries] - p.s, axis=1)
+    len_t = np.linalg.norm(net.nodes[exits] - p.t, axis=1)
+    routes = alternative_routes(net, p.edge_j.weights(net.edge_lengths, cfg.w),
+                                p.edge_j.combine(legs_s, len_s, cfg.w), entries,
+                                p.edge_j.combine(legs_t, len_t, cfg.w), exits, cfg.routes)
+    p.clock.lap('search_ms')
+    if not cfg.optimise:
+        best = _smooth_route(p, routes[0], cfg.k)
+        p.clock.lap('smoothing_ms')
+        return best
+    return _optimise_routes(p, routes)
+
+
+def _optimiser_cutoff(segments: int, threats: ThreatField, spacing: float) -> float | None:
+    """Cut-off radius for a minimisation over ``segments`` segments, None to count all.
+
+    Every threat is counted while that costs at most OPTIMISER_DENSE_PAIRS pairs per
+    evaluation. Beyond, far threats are dropped: a much wider radius than the edge costs'
+    because the optimiser follows the gradient, which a cut-off distorts, into places the
+    Dijkstra route never went.
+    """
+    if segments * len(threats) <= OPTIMISER_DENSE_PAIRS:
+        return None
+    return OPTIMISER_CUTOFF_SPACINGS * spacing
+
+
+def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
+    """Screen every route and the straight line coarsely, then refine the lowest-J one.
+
+    Each route lies in its own basin of J (it passes the threats on its own sides); a cheap
+    coarse minimisation of each tells the basins apart before the fine one runs once.
+    """
+    cfg, threats, nodes = p.config, p.threats, p.network.nodes
+    w = cfg.w
+    bounds = p.box if cfg.confine_to_box else None
+    spacing = threats.typical_spacing(p.box)
+    # The straight line is the other natural start, and wins when length dominates.
+    seeds = [(f'route {i}', seq) for i, seq in enumerate(routes)] + [('straight line', [])]
+    screened = []
+    for name, seq in seeds:
+        initial = np.vstack([p.s, nodes[seq], p.t]) if seq else np.vstack([p.s, p.t])
+        coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
+                               90.0, 180.0, cutoff=_optimiser_cutoff(COARSE_SEGMENTS, threats,
+                                                                     spacing),
+                               tolerance=COARSE_TOLERANCE).points
+        screened.append((p.cost(coarse).J, name, seq, coarse))
+    screened.sort(key=lambda item: item[0])
+    p.clock.lap('screening_ms')
+    best: Candidate | None = None
+    # Refine the best basin; if the angle limits cannot be met there, the next basins get
+    # a chance (a feasible path beats any infeasible one, then lower J wins).
+    for _, name, seq, coarse in screened[:FEASIBILITY_TRIES]:
+        opt = minimise_cost(resample(coarse, cfg.n_points), threats, w, bounds,
+                            cfg.max_pitch_deg, cfg.max_turn_deg,
+                            cutoff=_optimiser_cutoff(cfg.n_points, threats, spacing))
+        seq = seq or routes[0]   # the line won: report the best route as the initial path
+        cand = Candidate(seq=seq, initial=np.vstack([p.s, nodes[seq], p.t]), smoothed=None,
+                         smoothed_cost=None, final=opt.points, k=float('nan'), steps=0,
+                         converged=True, cost=p.cost(opt.points),
+                         angles=check_angles(opt.points, cfg.max_pitch_deg,
+                                             cfg.max_turn_deg), seed=name)
+        if best is None or ((cand.angles.feasible, -cand.cost.J)
+                            > (best.angles.feasible, -best.cost.J)):
+            best = cand
+        if best.angles.feasible:
+            break
+    p.clock.lap('optimisation_ms')
+    return best
+
+
+#: Method name -> the function that solves a Problem with it.
+METHOD_FUNCTIONS: dict[str, Callable[[Problem], Candidate]] = {
+    'paper': plan_paper, 'improved': plan_improved, 'best': plan_best}

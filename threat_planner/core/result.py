@@ -1,0 +1,99 @@
+"""PlanResult: everything one plan produced, and its ``--json`` summary."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from threat_planner.core.cost import Cost
+from threat_planner.core.partition import Network
+from threat_planner.core.smoothing import AngleCheck
+
+__all__ = ['PlanResult']
+
+
+@dataclass
+class PlanResult:
+    """Everything a plan produced.
+
+    Attributes:
+        method: Method used.
+        w: Threat weight used.
+        network: The incentre network.
+        entry: Entry node id (0-based).
+        exit: Exit node id (0-based).
+        node_sequence: Dijkstra node ids from entry to exit.
+        initial_path: Start, the Dijkstra nodes, goal, (m, 3) [m].
+        smoothed_path: Rest state of the mass-spring chain, (n+1, 3) [m]; None when
+            'best' went straight to the direct minimisation.
+        path: Final path, (n+1, 3) [m].
+        initial_cost: Cost of initial_path.
+        smoothed_cost: Cost of smoothed_path, or None.
+        cost: Cost of the final path.
+        k: Spring coefficient of the smoothing that produced the final path.
+        angles: Angle check of the final path.
+        smoothing_steps: Integration steps of the chosen smoothing.
+        smoothing_converged: Whether that integration met its stopping rule.
+        candidates: Final J for each (entry, exit) pair tried (Case 1), or empty.
+        k_sweep: Final J (inf if infeasible) for each k tried (Case 3), or empty.
+        seed: Which start the final path grew from ('route i' or 'straight line').
+        edge_cutoff: Cut-off radius of the edge costs [m], None if exact.
+        timings_ms: Wall time per stage [ms].
+    """
+
+    method: str
+    w: float
+    network: Network
+    entry: int
+    exit: int
+    node_sequence: list[int]
+    initial_path: NDArray
+    smoothed_path: NDArray | None
+    path: NDArray
+    initial_cost: Cost
+    smoothed_cost: Cost | None
+    cost: Cost
+    k: float
+    angles: AngleCheck
+    smoothing_steps: int
+    smoothing_converged: bool
+    candidates: dict[tuple[int, int], float] = field(default_factory=dict)
+    k_sweep: dict[float, float] = field(default_factory=dict)
+    seed: str = 'route 0'
+    edge_cutoff: float | None = None
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def feasible(self) -> bool:
+        """Final path meets both angle limits."""
+        return self.angles.feasible
+
+    def summary(self) -> dict:
+        """JSON-ready summary in the command line's ``--json`` layout."""
+        return {
+            'method': self.method,
+            'w': self.w,
+            'initial_path': self.initial_path.tolist(),
+            'path': self.path.tolist(),
+            'cost': {'initial': self.initial_cost.as_dict(),
+                     'smoothed': None if self.smoothed_cost is None
+                     else self.smoothed_cost.as_dict(),
+                     'final': self.cost.as_dict()},
+            'network': {'nodes': self.network.n_nodes, 'edges': self.network.n_edges},
+            'entry': self.entry,
+            'exit': self.exit,
+            'node_sequence': self.node_sequence,
+            # 'best' minimises J directly: no spring, no k (null rather than NaN in JSON).
+            'k': self.k if np.isfinite(self.k) else None,
+            'seed': self.seed,
+            'feasible': self.feasible,
+            'angles': {'max_pitch_deg': self.angles.max_pitch_deg,
+                       'max_turn_deg': self.angles.max_turn_deg,
+                       'pitch_ok': self.angles.pitch_ok, 'turn_ok': self.angles.turn_ok},
+            'smoothing': {'steps': self.smoothing_steps,
+                          'converged': self.smoothing_converged},
+            'edge_cutoff_m': self.edge_cutoff,
+            'timings_ms': self.timings_ms,
+        }

@@ -1,0 +1,244 @@
+"""Every setting of the planner and the node, declared once.
+
+Each :class:`Setting` names its type, default, range, unit and one-line help. From this
+table come :class:`~threat_planner.core.config.PlannerConfig`'s defaults and validation,
+the node's parameters with their ``ParameterDescriptor`` ranges
+(:mod:`threat_planner.ros.parameters`), the comments of ``config/planner.yaml``
+(:func:`params_file_text`, checked by a test) and the command line's planner options with
+their defaults in ``--help`` (:mod:`threat_planner.cli.options`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Optional
+
+from threat_planner.errors import InputError
+
+__all__ = ['METHODS', 'NODE_SETTINGS', 'PLANNER_SETTINGS', 'SETTINGS', 'Setting',
+           'params_file_text']
+
+METHODS = ('paper', 'improved', 'best')
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One setting: what it is, its default and the values it takes.
+
+    Attributes
+    ----------
+    name : str
+        Field of PlannerConfig (scope 'planner') or node parameter name.
+    kind : type
+        bool, int, float, str, or list for a fixed-length float array.
+    default : object
+        Default value.
+    help : str
+        One line of help, without the unit.
+    unit : str
+        Unit, for example ``'m'`` or ``'deg'``; '' for none.
+    lo, hi : float, optional
+        Range of a number; None for unbounded.
+    lo_open, hi_open : bool
+        Whether the range excludes its ends.
+    choices : tuple of str, optional
+        The values a string takes.
+    length : int
+        Number of values of a float array.
+    scope : str
+        ``'planner'`` (a PlannerConfig field) or ``'node'`` (the node's own).
+    node : bool
+        Whether the node declares it as a parameter.
+    cli : str, optional
+        Command-line option (without ``--``), or None for none.
+    non_empty : bool
+        A string that must not be blank.
+
+    """
+
+    name: str
+    kind: type
+    default: object
+    help: str
+    unit: str = ''
+    lo: Optional[float] = None
+    hi: Optional[float] = None
+    lo_open: bool = False
+    hi_open: bool = False
+    choices: Optional[tuple[str, ...]] = None
+    length: int = 0
+    scope: str = 'planner'
+    node: bool = True
+    cli: Optional[str] = None
+    non_empty: bool = False
+
+    @property
+    def rule(self) -> str:
+        """The constraint in words, as error messages and descriptors give it."""
+        if self.choices is not None:
+            return f'must be one of {", ".join(self.choices)}'
+        if self.kind is str:
+            return 'must be a non-empty string' if self.non_empty else 'must be a string'
+        if self.kind is bool:
+            return 'must be true or false'
+        if self.kind is list:
+            return f'{self.length} finite numbers'
+        lo = '<' if self.lo_open else '<='
+        hi = '<' if self.hi_open else '<='
+        if self.lo_open and self.hi_open and self.lo is not None and self.hi is not None:
+            return f'must satisfy {self.lo:g} {lo} {self.name} {hi} {self.hi:g}'
+        what = 'an integer' if self.kind is int else 'finite'
+        parts = []
+        if self.lo is not None:
+            parts.append(f'{">" if self.lo_open else ">="} {self.lo:g}')
+        if self.hi is not None:
+            parts.append(f'{"<" if self.hi_open else "<="} {self.hi:g}')
+        return f'must be {what}' + (' and ' if parts else '') + ' and '.join(parts)
+
+    @property
+    def doc(self) -> str:
+        """Help with the unit, as one line."""
+        return self.help + (f' [{self.unit}]' if self.unit else '')
+
+    def check(self, value: object) -> None:
+        """Raise InputError naming this setting unless `value` is allowed.
+
+        Float arrays are checked by the code that interprets them (bounds, start, goal).
+        """
+        if self.kind is list:
+            return
+        if not self._allowed(value):
+            raise InputError(f'{self.name}: {self.rule}, got {_plain(value)}')
+
+    def _allowed(self, value: object) -> bool:
+        if self.choices is not None:
+            return value in self.choices
+        if self.kind is str:
+            return isinstance(value, str) and (not self.non_empty or bool(value.strip()))
+        if self.kind is bool:
+            return isinstance(value, bool)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return False
+        if self.kind is int and value != int(value):
+            return False
+        if not math.isfinite(value):
+            return False
+        if self.lo is not None and (value <= self.lo if self.lo_open else value < self.lo):
+            return False
+        if self.hi is not None and (value >= self.hi if self.hi_open else value > self.hi):
+            return False
+        return True
+
+
+def _plain(value: object) -> str:
+    """Show a value as the user typed it: plain numbers, not numpy reprs."""
+    if hasattr(value, 'item') and not isinstance(value, (str, bytes)):
+        try:
+            value = value.item()
+        except (ValueError, TypeError):
+            pass
+    return repr(value)
+
+
+#: Every setting, planner settings first, in the order of ``config/planner.yaml``.
+SETTINGS: tuple[Setting, ...] = (
+    Setting('w', float, 0.5, 'Threat weight in J = w J_R + (1 - w) J_L', lo=0.0, hi=1.0,
+            lo_open=True, hi_open=True, cli='w'),
+    Setting('method', str, 'best', "Planning method: 'paper', 'improved' or 'best'",
+            choices=METHODS, cli='method'),
+    Setting('k', float, 1000.0, 'Spring coefficient of the smoothing chain', lo=0.0,
+            hi=1.0e6, lo_open=True, cli='k'),
+    Setting('auto_k', bool, False, 'Sweep k over 500..3000 for the least J (paper Case 3)',
+            cli='auto-k'),
+    Setting('damping', float, 20.0, 'Damping coefficient b between neighbouring chain masses',
+            lo=0.0, hi=1.0e6),
+    Setting('mass', float, 1.0, 'Mass M of each chain point', lo=0.0, hi=1.0e6,
+            lo_open=True),
+    Setting('q', float, 500.0, 'Repulsion constant Q of the threat potential', lo=0.0,
+            hi=1.0e9),
+    Setting('n_points', int, 40, 'Number of chain segments n of the final path (n + 1 points)',
+            lo=2, hi=10_000, cli='n-points'),
+    Setting('max_pitch_deg', float, 45.0, 'Pitch limit', unit='deg', lo=0.0, hi=90.0,
+            lo_open=True, cli='max-pitch'),
+    Setting('max_turn_deg', float, 60.0, 'Turn limit between consecutive segments',
+            unit='deg', lo=0.0, hi=180.0, lo_open=True, cli='max-turn'),
+    Setting('entry_candidates', int, 3, 'Nearest network nodes tried as entry and as exit',
+            lo=1, hi=64, cli='entry-candidates'),
+    Setting('routes', int, 6, "Distinct network routes screened by 'best' (plus the line)",
+            lo=1, hi=32, node=False),
+    Setting('box_divisions', int, 2, 'Intervals per box edge of the auxiliary surface lattice',
+            lo=1, hi=16, node=False),
+    Setting('optimise', bool, True, "Run the direct J minimisation ('best' only)",
+            node=False),
+    Setting('confine_to_box', bool, True, 'Keep the optimised path inside the bounds',
+            cli='leave-box'),
+    Setting('max_smoothing_steps', int, 4000, 'Step limit of the chain integration', lo=0,
+            hi=10_000_000, node=False),
+    Setting('bounds', list, [0.0, 0.0, 0.0, 100.0, 100.0, 100.0],
+            'Flight box [xmin, ymin, zmin, xmax, ymax, zmax] in frame_id', unit='m',
+            length=6, scope='node'),
+    Setting('frame_id', str, 'map',
+            'Frame of every input and output; inputs in another frame are refused',
+            scope='node', non_empty=True),
+    Setting('start', list, [0.0, 0.0, 50.0],
+            'Start [x, y, z], used until a start message arrives; setting it replaces the '
+            'current start', unit='m', length=3, scope='node'),
+    Setting('goal', list, [100.0, 100.0, 50.0],
+            'Goal [x, y, z], used until a goal_pose message arrives; setting it replaces '
+            'the current goal', unit='m', length=3, scope='node'),
+    Setting('default_intensity', float, 100000.0,
+            'Intensity F given to every threat of a PoseArray', lo=0.0, hi=1.0e12,
+            lo_open=True, scope='node'),
+    Setting('max_threats', int, 10000, 'Largest threat picture accepted', lo=0,
+            hi=1_000_000, scope='node'),
+    Setting('record', str, '',
+            "MCAP recording of inputs and outputs: a path ending in .mcap (one file) or a "
+            "folder (one bag per run); '' = off", scope='node'),
+)
+
+#: The settings that are PlannerConfig fields.
+PLANNER_SETTINGS = {s.name: s for s in SETTINGS if s.scope == 'planner'}
+#: The node's parameters, in declaration order.
+NODE_SETTINGS = {s.name: s for s in SETTINGS if s.node}
+
+
+def _yaml_value(value: object) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, str):
+        return value if value else "''"
+    if isinstance(value, list):
+        return '[' + ', '.join(repr(float(v)) for v in value) + ']'
+    return repr(value)
+
+
+def params_file_text(node_name: str = 'threat_planner') -> str:
+    """Return the node's parameters file: every default with its help, as in ``config/``.
+
+    Parameters
+    ----------
+    node_name : str
+        Node name heading the file.
+
+    Returns
+    -------
+    str
+        YAML text (what ``config/planner.yaml`` holds).
+
+    """
+    lines = [
+        '# Default parameters of the threat_planner node (ROS 2 parameters file).',
+        '# Use: ros2 run threat_planner planner_node --ros-args --params-file planner.yaml',
+        f'# Every value can be changed at run time (ros2 param set /{node_name} w 0.7);',
+        '# a bad value is refused with the reason. Generated from',
+        '# threat_planner/core/settings.py (params_file_text); a test keeps them equal.',
+        f'{node_name}:',
+        '  ros__parameters:',
+    ]
+    for s in NODE_SETTINGS.values():
+        rule = '' if s.kind in (bool, list) or (s.kind is str and not s.non_empty) \
+            else f' ({s.rule.replace("must ", "")})'
+        lines.append(f'    # {s.doc}{rule}.')
+        lines.append(f'    {s.name}: {_yaml_value(s.default)}')
+    return '\n'.join(lines) + '\n'
