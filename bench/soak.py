@@ -39,7 +39,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import PointCloud2
 
 from threat_planner.ros.conversions import ns_to_stamp, stamp_to_ns
-from threat_planner.ros.node import THREAT_INPUT
+from threat_planner.ros.interface import THREAT_INPUT
 from threat_planner.bag import read_messages
 from threat_planner.core.scenario import load_scenario
 from threat_planner.ros.publisher import ThreatDrift

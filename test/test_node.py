@@ -28,7 +28,8 @@ from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON,
 from threat_planner.ros.conversions import (path_from_msg, stamp_to_ns, threats_from_pointcloud2)
 from threat_planner.errors import InputError
 from threat_planner.core.planner import plan, PlannerConfig
-from threat_planner.ros.node import (PARAMETER_DEFAULTS, PlanWorker, settings_from_parameters)
+from threat_planner.ros.parameters import PARAMETER_DEFAULTS, settings_from_parameters
+from threat_planner.ros.worker import PlanWorker
 from threat_planner.bag import read_messages
 from threat_planner.core.scenario import load_scenario
 from threat_planner.ros.publisher import ThreatDrift

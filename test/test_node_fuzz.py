@@ -58,7 +58,7 @@ from threat_planner.ros.conversions import (path_from_msg, point_from_pose_stamp
                                             threats_from_pointcloud2, threats_from_pose_array)
 from threat_planner.errors import InputError
 from threat_planner.core.planner import check_endpoints, plan
-from threat_planner.ros.node import PARAMETER_DEFAULTS, settings_from_parameters
+from threat_planner.ros.parameters import PARAMETER_DEFAULTS, settings_from_parameters
 from threat_planner.bag import read_messages
 from threat_planner.core.threats import ThreatField
 

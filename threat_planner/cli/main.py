@@ -30,7 +30,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     cfg = config_from(args)
     progress = ProgressBar('sweep')
     if args.record:
-        from threat_planner.bag.replay import record_plan
+        from threat_planner.bag.record import record_plan
         result, recording = record_plan(scenario, cfg, args.record, progress=progress)
     else:
         result = plan(scenario.threats, scenario.start, scenario.goal, scenario.box, cfg,
@@ -75,7 +75,8 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from threat_planner.bag.replay import load_bag, play_live, replay_bag
+    from threat_planner.bag.live import play_live
+    from threat_planner.bag.replay import load_bag, replay_bag
     changes = overrides(args)
     bag = load_bag(args.bag, tolerant=args.tolerant)
     if args.live:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+import textwrap
 from typing import Optional
 
 from threat_planner.errors import InputError
@@ -88,13 +89,27 @@ class Setting:
         hi = '<' if self.hi_open else '<='
         if self.lo_open and self.hi_open and self.lo is not None and self.hi is not None:
             return f'must satisfy {self.lo:g} {lo} {self.name} {hi} {self.hi:g}'
-        what = 'an integer' if self.kind is int else 'finite'
+        num = (lambda v: str(int(v))) if self.kind is int else (lambda v: f'{v:g}')
         parts = []
         if self.lo is not None:
-            parts.append(f'{">" if self.lo_open else ">="} {self.lo:g}')
+            parts.append(f'{">" if self.lo_open else ">="} {num(self.lo)}')
         if self.hi is not None:
-            parts.append(f'{"<" if self.hi_open else "<="} {self.hi:g}')
-        return f'must be {what}' + (' and ' if parts else '') + ' and '.join(parts)
+            parts.append(f'{"<" if self.hi_open else "<="} {num(self.hi)}')
+        if self.kind is int:
+            return ' and '.join(['must be an integer' + (f' {parts[0]}' if parts else '')]
+                                + parts[1:])
+        return ' and '.join(['must be finite'] + parts)
+
+    @property
+    def span(self) -> str:
+        """The range in short form (``0 < w < 1``, ``2..10000``), '' if unbounded."""
+        if self.kind not in (int, float) or (self.lo is None and self.hi is None):
+            return ''
+        if self.kind is int and self.lo is not None and self.hi is not None:
+            return f'{int(self.lo)}..{int(self.hi)}'
+        lo = '' if self.lo is None else f'{self.lo:g} {"<" if self.lo_open else "<="} '
+        hi = '' if self.hi is None else f' {"<" if self.hi_open else "<="} {self.hi:g}'
+        return f'{lo}{self.name}{hi}'
 
     @property
     def doc(self) -> str:
@@ -237,8 +252,7 @@ def params_file_text(node_name: str = 'threat_planner') -> str:
         '  ros__parameters:',
     ]
     for s in NODE_SETTINGS.values():
-        rule = '' if s.kind in (bool, list) or (s.kind is str and not s.non_empty) \
-            else f' ({s.rule.replace("must ", "")})'
-        lines.append(f'    # {s.doc}{rule}.')
+        text = s.doc + (f'; {s.span}' if s.span else '') + '.'
+        lines.extend(textwrap.wrap(text, 92, initial_indent='    # ', subsequent_indent='    # '))
         lines.append(f'    {s.name}: {_yaml_value(s.default)}')
     return '\n'.join(lines) + '\n'

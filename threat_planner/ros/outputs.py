@@ -1,0 +1,292 @@
+"""How a plan becomes the node's outputs: one place, used by the node and by ``plan --record``.
+
+:func:`run_plan` plans one :class:`PlanRequest` and hands its outputs over in phases, as
+soon as each is ready: ``'paths'`` (``initial_path`` and ``path``), then ``'done'``
+(``network`` markers and ``plan_info``), or ``'error'`` (an ERROR ``plan_info``).
+:func:`outcome_messages` gives the (topic, message) pairs of a phase in publishing order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+import time
+from typing import Callable, Mapping, Optional
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.msg import Path
+from numpy.typing import NDArray
+from visualization_msgs.msg import MarkerArray
+
+from threat_planner.core.planner import plan
+from threat_planner.core.result import PlanResult
+from threat_planner.core.threats import Box, ThreatField
+from threat_planner.errors import InputError, PlanningError
+from threat_planner.ros.conversions import (network_markers, path_to_msg, plan_info_msg,
+                                            stamp_to_ns)
+from threat_planner.ros.parameters import NodeSettings
+
+__all__ = ['PlanOutcome', 'PlanRequest', 'input_values', 'outcome_messages', 'plan_done_info',
+           'plan_error_info', 'plan_markers', 'run_plan']
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """A snapshot of everything a plan needs, tagged with the input it answers."""
+
+    seq: int
+    source: str
+    stamp: Time
+    received_ns: int
+    threats: ThreatField
+    start: NDArray
+    goal: NDArray
+    settings: NodeSettings
+
+
+@dataclass
+class PlanOutcome:
+    """A plan's result and messages, handed from the worker to the publisher."""
+
+    request: PlanRequest
+    result: Optional[PlanResult] = None
+    initial_path: Optional[Path] = None
+    path: Optional[Path] = None
+    network: Optional[MarkerArray] = None
+    network_error: Optional[str] = None
+    error: Optional[str] = None
+    exception: Optional[Exception] = None
+    queue_ms: float = 0.0
+    plan_ms: float = 0.0
+    messages_ms: float = 0.0
+
+
+def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None],
+             now_ns: Callable[[], int],
+             progress: Optional[Callable[[int, int], None]] = None) -> PlanOutcome:
+    """Plan `request` and build its messages, handing each phase over when it is ready.
+
+    Parameters
+    ----------
+    request : PlanRequest
+        What to plan.
+    hand_over : Callable[[str, PlanOutcome], None]
+        Called with ``'paths'`` then ``'done'``, or with ``'error'``.
+    now_ns : Callable[[], int]
+        The clock the request's ``received_ns`` was read from [ns].
+    progress : callable, optional
+        ``progress(done, total)`` for long sweeps.
+
+    Returns
+    -------
+    PlanOutcome
+        The outcome (also handed over).
+
+    """
+    outcome = PlanOutcome(request)
+    t0 = time.perf_counter()
+    outcome.queue_ms = max(0.0, 1e-6 * (now_ns() - request.received_ns))
+    s = request.settings
+    try:
+        result = plan(request.threats, request.start, request.goal, s.box, s.config,
+                      progress=progress)
+        t1 = time.perf_counter()
+        outcome.plan_ms = 1e3 * (t1 - t0)
+        outcome.result = result
+        outcome.initial_path = path_to_msg(result.initial_path, s.frame_id, request.stamp)
+        outcome.path = path_to_msg(result.path, s.frame_id, request.stamp)
+    except (InputError, PlanningError) as exc:
+        outcome.error, outcome.exception = str(exc), exc
+    except Exception as exc:  # noqa: B902 - a planner bug must not kill the worker
+        outcome.error = f'planner failed: {type(exc).__name__}: {exc}'
+        outcome.exception = exc
+    if outcome.error is not None:
+        hand_over('error', outcome)
+        return outcome
+    # The paths go out before the markers are built: for 1000 threats the MarkerArray
+    # takes ~0.1 s, which a path follower should not wait for.
+    hand_over('paths', outcome)
+    try:
+        outcome.network = plan_markers(result, request.threats, s.box, s.frame_id,
+                                       request.stamp)
+    except Exception as exc:  # noqa: B902 - a drawing bug must not lose the plan
+        outcome.network_error = f'{type(exc).__name__}: {exc}'
+    outcome.messages_ms = 1e3 * (time.perf_counter() - t1)
+    hand_over('done', outcome)
+    return outcome
+
+
+def outcome_messages(phase: str, outcome: PlanOutcome,
+                     values: Mapping[str, object]) -> list[tuple[str, object]]:
+    """Return the (relative topic, message) pairs of one phase, in publishing order.
+
+    Parameters
+    ----------
+    phase : str
+        ``'paths'``, ``'done'`` or ``'error'``.
+    outcome : PlanOutcome
+        The plan.
+    values : Mapping[str, object]
+        The input's ``plan_info`` values (:func:`input_values`), for ``'done'``/``'error'``.
+
+    Returns
+    -------
+    list of (str, message)
+        What to publish.
+
+    """
+    req = outcome.request
+    if phase == 'paths':
+        return [('initial_path', outcome.initial_path), ('path', outcome.path)]
+    if phase == 'error':
+        return [('plan_info', plan_error_info(values, req.seq, req.source, outcome.error,
+                                              req.stamp))]
+    info = plan_done_info(values, outcome.result, len(req.threats), req.stamp,
+                          outcome.queue_ms, outcome.plan_ms, outcome.messages_ms,
+                          outcome.network_error)
+    network = [] if outcome.network is None else [('network', outcome.network)]
+    return network + [('plan_info', info)]
+
+
+def plan_error_info(values: Mapping[str, object], seq: int, source: str, error: str,
+                    stamp: Time) -> DiagnosticArray:
+    """Build the ERROR ``plan_info`` of a plan that failed; its message is the log line."""
+    values = dict(values)
+    values['error'] = error
+    return plan_info_msg('ERROR', f'plan for input #{seq} ({source}) failed: {error}',
+                         values, stamp)
+
+
+def input_values(seq: int, source: str, stamp: Time, frame_id: str, received: int,
+                 rejected: int, skipped: int, plans: int) -> dict[str, object]:
+    """Return the ``plan_info`` values naming an input and the node's counters.
+
+    Parameters
+    ----------
+    seq : int
+        Input sequence number.
+    source : str
+        Topic of the input, or ``'parameters'``.
+    stamp : builtin_interfaces.msg.Time
+        The input's stamp.
+    frame_id : str
+        Frame of the outputs.
+    received, rejected, skipped, plans : int
+        Counters of inputs received, rejected and skipped, and of plans completed.
+
+    Returns
+    -------
+    dict[str, object]
+        Keys in ``plan_info`` order.
+
+    """
+    return {
+        'input_seq': seq,
+        'input_source': source,
+        'input_stamp_ns': stamp_to_ns(stamp),
+        'frame_id': frame_id,
+        'inputs_received': received,
+        'inputs_rejected': rejected,
+        'inputs_skipped': skipped,
+        'plans_completed': plans,
+    }
+
+
+def plan_markers(result: PlanResult, threats: ThreatField, box: Box, frame_id: str,
+                 stamp: Time) -> MarkerArray:
+    """Draw a plan's threats, mesh, network and paths, sized to the flight box.
+
+    Parameters
+    ----------
+    result : PlanResult
+        The plan.
+    threats : ThreatField
+        The threats it was planned through.
+    box : Box
+        Flight box (sets the marker sizes).
+    frame_id : str
+        Frame of the markers.
+    stamp : builtin_interfaces.msg.Time
+        Stamp of the markers (the input's).
+
+    Returns
+    -------
+    MarkerArray
+        What the node publishes on ``network``.
+
+    """
+    scale = box.diagonal / math.sqrt(3.0) / 100.0
+    net = result.network
+    return network_markers(
+        threats.positions, threats.intensities,
+        vertices=net.vertices, delaunay_edges=net.delaunay_edges(), nodes=net.nodes,
+        network_edges=net.edges, initial_path=result.initial_path,
+        path=result.path, frame_id=frame_id, stamp=stamp,
+        threat_diameter=4.0 * scale, node_diameter=scale, line_width=0.2 * scale)
+
+
+def plan_done_info(values: Mapping[str, object], result: PlanResult, n_threats: int,
+                   stamp: Time, queue_ms: float, plan_ms: float, messages_ms: float,
+                   network_error: Optional[str] = None) -> DiagnosticArray:
+    """Build the ``plan_info`` of a finished plan (OK, or WARN if an angle limit is broken).
+
+    Parameters
+    ----------
+    values : Mapping[str, object]
+        The input's values (:func:`input_values`); the result's are appended.
+    result : PlanResult
+        The plan.
+    n_threats : int
+        Threats planned through.
+    stamp : builtin_interfaces.msg.Time
+        The input's stamp.
+    queue_ms, plan_ms, messages_ms : float
+        Wait before planning, planning and marker drawing times [ms].
+    network_error : str, optional
+        Why the markers could not be drawn.
+
+    Returns
+    -------
+    DiagnosticArray
+        The message; its status message is the node's log line.
+
+    """
+    values = dict(values)
+    values.update(_result_values(result, n_threats))
+    values['queue_ms'] = queue_ms
+    values['plan_wall_ms'] = plan_ms
+    values['messages_ms'] = messages_ms
+    if network_error is not None:
+        values['network_error'] = network_error
+    status = 'OK' if result.feasible else 'WARN'
+    message = (f'plan for input #{values["input_seq"]} ({values["input_source"]}): '
+               f'J={result.cost.J:.6g} through {n_threats} threats in {plan_ms:.0f} ms'
+               + ('' if result.feasible else '; violates the pitch or turn limit'))
+    return plan_info_msg(status, message, values, stamp)
+
+
+def _result_values(result: PlanResult, n_threats: int) -> dict[str, object]:
+    values: dict[str, object] = {
+        'method': result.method,
+        'w': result.w,
+        'threats': n_threats,
+        'J': result.cost.J,
+        'J_L': result.cost.J_L,
+        'J_R': result.cost.J_R,
+        'initial_J': result.initial_cost.J,
+        'initial_J_L': result.initial_cost.J_L,
+        'initial_J_R': result.initial_cost.J_R,
+        'nodes': result.network.n_nodes,
+        'edges': result.network.n_edges,
+        'entry': result.entry,
+        'exit': result.exit,
+        'k': result.k,
+        'feasible': result.feasible,
+        'max_pitch_deg': result.angles.max_pitch_deg,
+        'max_turn_deg': result.angles.max_turn_deg,
+        'path_points': len(result.path),
+        'initial_path_points': len(result.initial_path),
+    }
+    values.update(result.timings_ms)
+    return values

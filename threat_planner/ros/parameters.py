@@ -1,0 +1,152 @@
+"""The node's parameters: declarations derived from the settings, and their validation.
+
+Every parameter, its default, range, unit and help come from
+:data:`threat_planner.core.settings.SETTINGS`; this module turns them into
+``ParameterDescriptor`` s and checks a set of values as a whole
+(:func:`settings_from_parameters`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+from threat_planner.core.config import PlannerConfig
+from threat_planner.core.settings import NODE_SETTINGS
+from threat_planner.core.threats import as_point, Box
+from threat_planner.errors import InputError
+
+__all__ = ['CONFIG_FIELDS', 'NodeSettings', 'PARAMETER_DEFAULTS', 'PLANNING_PARAMETERS',
+           'as_declared', 'descriptor', 'settings_from_parameters']
+
+
+def _copy(value: object) -> object:
+    return list(value) if isinstance(value, list) else value
+
+
+#: Every parameter's default, as in ``config/planner.yaml`` (a fresh copy of each list).
+PARAMETER_DEFAULTS: dict[str, object] = {
+    name: _copy(s.default) for name, s in NODE_SETTINGS.items()}
+#: Node parameters that are PlannerConfig fields.
+CONFIG_FIELDS = tuple(name for name, s in NODE_SETTINGS.items() if s.scope == 'planner')
+#: Parameters whose change can alter the plan; the rest (recording, input limits) cannot.
+PLANNING_PARAMETERS = frozenset(PARAMETER_DEFAULTS) - {'record', 'max_threats',
+                                                       'default_intensity'}
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    """The node's parameters, validated and converted.
+
+    Attributes
+    ----------
+    config : PlannerConfig
+        Planner settings.
+    box : Box
+        Flight box.
+    frame_id : str
+        Frame of all inputs and outputs.
+    start : NDArray
+        Start parameter (3,) [m].
+    goal : NDArray
+        Goal parameter (3,) [m].
+    default_intensity : float
+        Intensity of PoseArray threats.
+    max_threats : int
+        Largest accepted threat picture.
+    record : str
+        Recording target, '' for none.
+
+    """
+
+    config: PlannerConfig
+    box: Box
+    frame_id: str
+    start: NDArray
+    goal: NDArray
+    default_intensity: float
+    max_threats: int
+    record: str
+
+
+def _numbers(name: str, value: object, count: int, what: str) -> NDArray:
+    if isinstance(value, (str, bytes, bool)) or not hasattr(value, '__len__'):
+        raise InputError(f'{name}: expected {what}, got {value!r}')
+    try:
+        arr = np.asarray(list(value), dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f'{name}: expected {what}, got {value!r}') from None
+    if arr.shape != (count,):
+        raise InputError(f'{name}: expected {what}, got {arr.size} values')
+    if not np.isfinite(arr).all():
+        raise InputError(f'{name}: not finite: {arr.tolist()}')
+    return arr
+
+
+def settings_from_parameters(values: Mapping[str, object]) -> NodeSettings:
+    """Validate parameter values and convert them to NodeSettings.
+
+    Parameters
+    ----------
+    values : Mapping[str, object]
+        Every name of :data:`PARAMETER_DEFAULTS` with its value (as rclpy gives it:
+        float arrays may be lists, tuples or ``array.array``).
+
+    Returns
+    -------
+    NodeSettings
+        The converted settings.
+
+    Raises
+    ------
+    InputError
+        Naming the first bad parameter and its value; the text of
+        ``PlannerConfig.validated()`` for planner settings.
+
+    """
+    try:
+        config = PlannerConfig(**{name: values[name] for name in CONFIG_FIELDS})
+    except TypeError as exc:
+        raise InputError(f'planner settings: {exc}') from None
+    config.validated()
+    bounds = _numbers('bounds', values['bounds'], 6,
+                      '6 numbers [xmin, ymin, zmin, xmax, ymax, zmax]')
+    try:
+        box = Box.from_corners(bounds[:3], bounds[3:])
+    except InputError as exc:
+        raise InputError(str(exc).replace('bounds.min', 'bounds').replace(
+            'bounds.max', 'bounds')) from None
+    start = as_point('start', _numbers('start', values['start'], 3, '[x, y, z]'))
+    goal = as_point('goal', _numbers('goal', values['goal'], 3, '[x, y, z]'))
+    for name in ('frame_id', 'default_intensity', 'max_threats', 'record'):
+        NODE_SETTINGS[name].check(values[name])
+    return NodeSettings(config=config, box=box, frame_id=values['frame_id'], start=start,
+                        goal=goal, default_intensity=float(values['default_intensity']),
+                        max_threats=int(values['max_threats']),
+                        record=values['record'].strip())
+
+
+def descriptor(name: str) -> ParameterDescriptor:
+    """Return the ParameterDescriptor of parameter `name`: help, unit, rule and range."""
+    s = NODE_SETTINGS[name]
+    desc = ParameterDescriptor(name=name, description=s.doc, additional_constraints=s.rule)
+    if s.lo is not None and s.hi is not None and s.kind is float:
+        desc.floating_point_range = [FloatingPointRange(from_value=float(s.lo),
+                                                        to_value=float(s.hi), step=0.0)]
+    elif s.lo is not None and s.hi is not None and s.kind is int:
+        desc.integer_range = [IntegerRange(from_value=int(s.lo), to_value=int(s.hi), step=1)]
+    if s.kind is list:
+        # `-p bounds:=[0,0,0,100,100,100]` arrives as an integer array; accept it and
+        # check the numbers ourselves rather than refuse it for its element type.
+        desc.dynamic_typing = True
+    return desc
+
+
+def as_declared(name: str, value: object) -> object:
+    """Give a value the type its parameter is declared with (a float k, an int n_points)."""
+    kind = NODE_SETTINGS[name].kind
+    return kind(value) if kind in (bool, int, float) else value
