@@ -160,7 +160,11 @@ def _copy(source: Path, target: Path, fix_cdr: bool) -> Tuple[RepairReport, _Rec
                     _write(writer, item, ids, channel_ids, found, report, fix_cdr)
                 report.bytes_read = end
                 if isinstance(record, Footer):
-                    report.complete = True
+                    # Complete only with the closing magic right after the footer.
+                    stream.seek(end)
+                    if stream.read() == _MAGIC:
+                        report.complete, report.bytes_read = True, size
+                    break
             writer.finish()
     report.bytes_dropped = size - report.bytes_read
     return report, found
