@@ -31,6 +31,7 @@ from typing import Dict, Optional, Union
 from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 import yaml
 
+from threat_planner.bag.cdr import canonical_cdr
 from threat_planner.bag.definitions import (canonical_type_name, MESSAGE_ENCODING,
                                             message_definition, message_type_name, PROFILE,
                                             SCHEMA_ENCODING, type_description_hash)
@@ -327,10 +328,16 @@ class McapRecorder:
     def _serialize(topic: str, msg) -> bytes:
         from rclpy.serialization import serialize_message
         try:
-            return serialize_message(msg)
+            data = serialize_message(msg)
         except Exception as exc:  # noqa: B902 - rclpy's C layer raises assorted types
             raise RecordingError(f'{topic}: cannot serialise {type(msg).__name__}: {exc}') \
                 from exc
+        # rclpy's buffer has trailing bytes and uninitialised padding (see bag/cdr.py).
+        type_name = message_type_name(msg)
+        try:
+            return canonical_cdr(data, type_name, message_definition(type_name))
+        except RecordingError as exc:
+            raise RecordingError(f'{topic}: {exc}') from exc
 
     def _topic(self, topic: str, type_name: str, qos) -> _Topic:
         entry = self._topics.get(topic)

@@ -1,4 +1,4 @@
-"""Command line: ``threat-planner plan | paper | replay``.
+"""Command line: ``threat-planner plan | paper | replay | bag``.
 
 Errors in the user's input (a bad scenario file, a bad option value) exit with status 2 and
 one line on stderr, never a traceback.
@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 import sys
 
+from threat_planner.cli.bag import add_bag_commands
 from threat_planner.errors import ThreatPlannerError
 from threat_planner.cli.options import add_planner_options, config_from, overrides, ProgressBar
 from threat_planner.core.planner import plan
@@ -160,6 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
     live.add_argument('--timeout', type=float, default=30.0,
                       help='longest wait for the node and for its last answer [s]')
     p_replay.set_defaults(func=_cmd_replay)
+    add_bag_commands(sub)
     return parser
 
 
