@@ -55,13 +55,14 @@ def run(seeds: bool, repeats: int, n_points: int) -> list[dict]:
             yard = _yardstick(key, sc, w, ref)
             cfg = replace(PlannerConfig(w=w, method='best', n_points=n_points), **LIMITS_OFF)
             if not seeds:
-                cfg = replace(cfg, extra_seeds=False) if hasattr(cfg, 'extra_seeds') else cfg
+                cfg = replace(cfg, surface_seeds=False)
             times = []
             for _ in range(repeats):
                 t0 = time.perf_counter()
                 r = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
                 times.append(1e3 * (time.perf_counter() - t0))
-            inside = bool(np.all(r.path >= sc.box.lo - 1e-9) and np.all(r.path <= sc.box.hi + 1e-9))
+            inside = bool(np.all(r.path >= sc.box.lo - 1e-9)
+                          and np.all(r.path <= sc.box.hi + 1e-9))
             rows.append({'scenario': name, 'w': w, 'n_threats': len(sc.threats),
                          'J': r.cost.J, 'yardstick': yard, 'ratio': r.cost.J / yard,
                          'ms': float(np.median(times)), 'seed': r.seed, 'in_box': inside})
@@ -74,8 +75,8 @@ def markdown(runs: dict[str, list[dict]], n_points: int) -> str:
     """Side-by-side table of the runs (same cases, same machine, one after the other)."""
     labels = list(runs)
     first = runs[labels[0]]
-    head = ['scenario', 'w', 'N', 'yardstick J'] + [f'{lab}: {c}' for lab in labels
-                                                   for c in ('J', 'ratio', 'ms')]
+    head = ['scenario', 'w', 'N', 'yardstick J']
+    head += [f'{lab}: {c}' for lab in labels for c in ('J', 'ratio', 'ms')]
     lines = ['# In-box quality of `best`, angle limits off', '',
              'Rules of every row: path confined to the flight box, max_pitch_deg = 90, '
              f'max_turn_deg = 180 (limits off), n_points = {n_points}; yardstick = '

@@ -33,6 +33,7 @@ class PlannerConfig:
         candidates: How 'improved' picks them: 'spread' (Fig. 11) or 'nearest'.
         network: 'box' (threats and the box surface) or 'threats' (the paper's).
         routes: Distinct network routes screened by 'best' (plus the straight line).
+        surface_seeds: Also screen routes over the box's surface lattice ('best' only).
         box_divisions: Intervals per box edge of the auxiliary surface lattice.
         optimise: Run the direct J minimisation ('best' only).
         confine_to_box: Keep the optimised path inside the flight box; False lets the
@@ -54,6 +55,7 @@ class PlannerConfig:
     candidates: str = _D['candidates']
     network: str = _D['network']
     routes: int = _D['routes']
+    surface_seeds: bool = _D['surface_seeds']
     box_divisions: int = _D['box_divisions']
     optimise: bool = _D['optimise']
     confine_to_box: bool = _D['confine_to_box']

@@ -24,6 +24,7 @@ from threat_planner.core.config import PlannerConfig
 from threat_planner.core.cost import Cost, path_cost
 from threat_planner.core.optimisation import minimise_cost
 from threat_planner.core.partition import Network
+from threat_planner.core.seeds import surface_routes
 from threat_planner.core.search import (alternative_routes, dijkstra_pairs, EdgeCosts,
                                         entry_candidates, nearest_nodes, segment_costs)
 from threat_planner.core.smoothing import AngleCheck, check_angles, resample, smooth
@@ -211,15 +212,22 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     bounds = p.box if cfg.confine_to_box else None
     spacing = threats.typical_spacing(p.box)
     # The straight line is the other natural start, and wins when length dominates.
-    seeds = [(f'route {i}', seq) for i, seq in enumerate(routes)] + [('straight line', [])]
+    seeds = [(f'route {i}', seq, np.vstack([p.s, nodes[seq], p.t]))
+             for i, seq in enumerate(routes)] + [('straight line', [], np.vstack([p.s, p.t]))]
     screened = []
-    for name, seq in seeds:
-        initial = np.vstack([p.s, nodes[seq], p.t]) if seq else np.vstack([p.s, p.t])
+    for name, seq, initial in seeds:
         coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
                                90.0, 180.0, cutoff=_optimiser_cutoff(COARSE_SEGMENTS, threats,
                                                                      spacing),
                                tolerance=COARSE_TOLERANCE).points
         screened.append((p.cost(coarse).J, name, seq, coarse))
+    # --- issue 11 global search (branch paperfaith): routes along the box's faces and
+    # edges, where dense fields put the in-box optimum, join the screened seeds as they
+    # are: 8 coarse segments would cut the box's corners back into the threats.
+    if cfg.surface_seeds and bounds is not None:
+        screened += [(p.cost(line).J, f'surface route {i}', [], line) for i, line in
+                     enumerate(surface_routes(threats, p.s, p.t, p.box, w))]
+    # --- end of the global-search hook
     screened.sort(key=lambda item: item[0])
     p.clock.lap('screening_ms')
     best: Candidate | None = None
