@@ -25,6 +25,26 @@ def _table(header: list[str], rows: list[list[object]]) -> str:
     return '\n'.join(lines)
 
 
+def _how(config: PlannerConfig) -> str:
+    """How the network and the entry/exit candidates of Table I were made, in words."""
+    net = ("the paper's network: Delaunay cells of the threat positions only (their convex "
+           'hull); start and goal join the nearest nodes' if config.network == 'threats' else
+           'threats plus a lattice on the flight box surface (grown by 2 % of its diagonal), '
+           'so the network covers the whole box; margin nodes are projected onto the box')
+    if config.candidates == 'spread':
+        cand = (f'the space around the start-goal axis is cut into K = '
+                f'{config.entry_candidates} equal sectors (the first one upwards) and each '
+                'sector gives its node nearest the start (exit: nearest the goal), among '
+                'nodes ahead (towards the other end) whose cell has a threat vertex, so the '
+                "flat all-lattice slivers of the box margin are left out; the paper's Fig. 11 "
+                'picks nodes spread around S "by eye" the same way')
+    else:
+        cand = f'the K = {config.entry_candidates} nodes nearest the start (exit: the goal)'
+    return (f'Network: {net}.\n\nEntry/exit candidates (Table I, II): {cand}. Cells with '
+            'equal J are routes that the mass-spring smoothing at k = 1000 brings to the same '
+            'rest state (the same side of every threat).')
+
+
 def reproduce(scenario: Scenario, out_dir: str | Path, config: PlannerConfig = PlannerConfig(),
               progress: Callable[[str], None] | None = None) -> dict[str, str]:
     """Run the paper's experiments on a scenario and write tables and figures.
@@ -96,7 +116,8 @@ def reproduce(scenario: Scenario, out_dir: str | Path, config: PlannerConfig = P
         'Table III: former vs improved Dijkstra node sequences (k=1000)': table3,
         'Case 3: best k per w (least J among angle-feasible paths)': table_k,
     }
-    text = f'# Paper Section IV on scenario {scenario.name}\n\n' + '\n\n'.join(
+    text = f'# Paper Section IV on scenario {scenario.name}\n\n' + _how(base) + '\n\n'
+    text += '\n\n'.join(
         f'## {name}\n\n{body}' for name, body in tables.items())
     text += '\n\n## Figures\n\n' + '\n'.join(f'![{f.stem}]({f.name})' for f in figures) + '\n'
     (out / 'tables.md').write_text(text)

@@ -29,8 +29,11 @@ class PlannerConfig:
         n_points: Number of chain segments n (the chain has n+1 points).
         max_pitch_deg: Pitch limit [deg].
         max_turn_deg: Turn (steering) limit between consecutive segments [deg].
-        entry_candidates: K nearest nodes tried as entry and as exit (Case 1).
+        entry_candidates: K nodes tried as entry and as exit (Case 1).
+        candidates: How 'improved' picks them: 'spread' (Fig. 11) or 'nearest'.
+        network: 'box' (threats and the box surface) or 'threats' (the paper's).
         routes: Distinct network routes screened by 'best' (plus the straight line).
+        surface_seeds: Also screen routes over the box's surface lattice ('best' only).
         box_divisions: Intervals per box edge of the auxiliary surface lattice.
         optimise: Run the direct J minimisation ('best' only).
         confine_to_box: Keep the optimised path inside the flight box; False lets the
@@ -49,7 +52,10 @@ class PlannerConfig:
     max_pitch_deg: float = _D['max_pitch_deg']
     max_turn_deg: float = _D['max_turn_deg']
     entry_candidates: int = _D['entry_candidates']
+    candidates: str = _D['candidates']
+    network: str = _D['network']
     routes: int = _D['routes']
+    surface_seeds: bool = _D['surface_seeds']
     box_divisions: int = _D['box_divisions']
     optimise: bool = _D['optimise']
     confine_to_box: bool = _D['confine_to_box']

@@ -3,8 +3,9 @@
 * ``paper``: the paper as written: length-weighted Dijkstra from the node nearest the start
   to the node nearest the goal, mass-spring smoothing at a fixed k, angle check.
 * ``improved``: the paper's Cases 1-3 together: Dijkstra on each edge's J (Case 2) for every
-  pair of the K nearest entry and exit nodes (Case 1), the pair of least final J kept, then
-  k swept over 500..3000 step 100 for least J among angle-feasible paths (Case 3).
+  pair of K entry and exit nodes spread around S and T as in Fig. 11 (Case 1), the pair of
+  least final J kept, then k swept over 500..3000 step 100 for least J among angle-feasible
+  paths (Case 3).
 * ``best``: one J-weighted Dijkstra with the start and goal joined to K candidates each,
   several distinct routes plus the straight line screened by a coarse minimisation of J,
   then the winner refined by L-BFGS-B on J itself within the box and the angle limits.
@@ -23,8 +24,9 @@ from threat_planner.core.config import PlannerConfig
 from threat_planner.core.cost import Cost, path_cost
 from threat_planner.core.optimisation import minimise_cost
 from threat_planner.core.partition import Network
+from threat_planner.core.seeds import surface_routes
 from threat_planner.core.search import (alternative_routes, dijkstra_pairs, EdgeCosts,
-                                        nearest_nodes, segment_costs)
+                                        entry_candidates, nearest_nodes, segment_costs)
 from threat_planner.core.smoothing import AngleCheck, check_angles, resample, smooth
 from threat_planner.core.threats import Box, ThreatField
 
@@ -147,8 +149,8 @@ def plan_paper(p: Problem) -> Candidate:
 def plan_improved(p: Problem) -> Candidate:
     """Cases 1-3: J-weighted Dijkstra per entry/exit pair, least J kept, then the k sweep."""
     cfg = p.config
-    entries = nearest_nodes(p.network, p.s, cfg.entry_candidates)
-    exits = nearest_nodes(p.network, p.t, cfg.entry_candidates)
+    entries = entry_candidates(p.network, p.s, p.t, cfg.entry_candidates, cfg.candidates)
+    exits = entry_candidates(p.network, p.t, p.s, cfg.entry_candidates, cfg.candidates)
     routes = dijkstra_pairs(p.network, p.edge_j.weights(p.network.edge_lengths, cfg.w),
                             entries, exits)
     p.clock.lap('search_ms')
@@ -210,15 +212,22 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     bounds = p.box if cfg.confine_to_box else None
     spacing = threats.typical_spacing(p.box)
     # The straight line is the other natural start, and wins when length dominates.
-    seeds = [(f'route {i}', seq) for i, seq in enumerate(routes)] + [('straight line', [])]
+    seeds = [(f'route {i}', seq, np.vstack([p.s, nodes[seq], p.t]))
+             for i, seq in enumerate(routes)] + [('straight line', [], np.vstack([p.s, p.t]))]
     screened = []
-    for name, seq in seeds:
-        initial = np.vstack([p.s, nodes[seq], p.t]) if seq else np.vstack([p.s, p.t])
+    for name, seq, initial in seeds:
         coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
                                90.0, 180.0, cutoff=_optimiser_cutoff(COARSE_SEGMENTS, threats,
                                                                      spacing),
                                tolerance=COARSE_TOLERANCE).points
         screened.append((p.cost(coarse).J, name, seq, coarse))
+    # --- issue 11 global search (branch paperfaith): routes along the box's faces and
+    # edges, where dense fields put the in-box optimum, join the screened seeds as they
+    # are: 8 coarse segments would cut the box's corners back into the threats.
+    if cfg.surface_seeds and bounds is not None:
+        screened += [(p.cost(line).J, f'surface route {i}', [], line) for i, line in
+                     enumerate(surface_routes(threats, p.s, p.t, p.box, w))]
+    # --- end of the global-search hook
     screened.sort(key=lambda item: item[0])
     p.clock.lap('screening_ms')
     best: Candidate | None = None

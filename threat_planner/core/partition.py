@@ -10,7 +10,10 @@ route around the threat cloud would not exist, and ground radars at one altitude
 than four threats) are flat or empty input on which Qhull fails (QH6154). We therefore add
 auxiliary vertices on the surface of the flight box, grown by a small margin: the cells then
 tile the whole box, the point set is never flat, and 0 to 3 threats still give a network.
-Auxiliary vertices carry no intensity; they only shape the cells.
+Auxiliary vertices carry no intensity; they only shape the cells. Nodes of cells in the
+margin are projected onto the box (the cells and their adjacency stay as they are), so every
+route on the network flies inside the box. :func:`paper_network` is the paper's network as
+written: threats only, over their convex hull.
 """
 
 from __future__ import annotations
@@ -185,7 +188,38 @@ def build_network(positions: NDArray, box: Box, box_divisions: int = 2) -> Netwo
     keep_aux = cKDTree(threat_pts).query(aux)[0] > MERGE_TOLERANCE * diag \
         if len(threat_pts) else np.ones(len(aux), dtype=bool)
     return _tetrahedralise(np.concatenate([threat_pts, aux[keep_aux]]), len(threat_pts),
-                           centre)
+                           centre, box)
+
+
+def paper_network(positions: NDArray, box: Box) -> Network:
+    """Build the paper's network: Delaunay of the threat positions alone (Section 3.2).
+
+    It covers only the threats' convex hull; a start or goal outside it joins the nearest
+    nodes, as in the paper. Nodes are projected onto the box when threats lie outside it.
+
+    Args:
+        positions: Threat positions, shape (N, 3) [m]; duplicates are merged.
+        box: Flight box.
+
+    Returns:
+        The Network.
+
+    Raises:
+        PlanningError: for fewer than 4 distinct threats, or all of them on one plane
+            or line (Qhull's flat initial simplex, QH6154).
+    """
+    diag = box.diagonal
+    pts = merge_duplicates(np.asarray(positions, float).reshape(-1, 3),
+                           MERGE_TOLERANCE * diag)
+    if len(pts) < 4:
+        raise PlanningError(f"network 'threats': the paper's network needs at least 4 "
+                            f"distinct threats, got {len(pts)}; use network 'box'")
+    centred = pts - pts.mean(axis=0)
+    sv = np.linalg.svd(centred, compute_uv=False)
+    if sv[2] <= 1e-9 * max(float(sv[0]), 1e-300):
+        raise PlanningError(f"network 'threats': the {len(pts)} threats lie on one plane, "
+                            "so Qhull's initial simplex is flat (QH6154); use network 'box'")
+    return _tetrahedralise(pts, len(pts), box=box)
 
 
 def bare_network(positions: NDArray) -> Network:
@@ -202,8 +236,12 @@ def bare_network(positions: NDArray) -> Network:
 
 
 def _tetrahedralise(vertices: NDArray, n_threat_vertices: int,
-                    centre: NDArray | None = None) -> Network:
-    """Delaunay cells of the vertices, their incentres and face-adjacency edges."""
+                    centre: NDArray | None = None, box: Box | None = None) -> Network:
+    """Delaunay cells of the vertices, their incentres and face-adjacency edges.
+
+    With a box, nodes outside it are projected onto it: a route joins the same cells but
+    never leaves the flight box.
+    """
     # Qhull works in absolute coordinates: a small box far from the origin loses every
     # digit of its size unless the points are centred first.
     shift = vertices.mean(axis=0) if centre is None else centre
@@ -217,6 +255,8 @@ def _tetrahedralise(vertices: NDArray, n_threat_vertices: int,
     tets = tri.simplices.astype(np.int64)
     nodes, radii = incentres(local[tets])
     nodes = nodes + shift
+    if box is not None:
+        nodes = box.clip(nodes)
     src = np.repeat(np.arange(len(tets)), 4)
     dst = tri.neighbors.reshape(-1)
     mask = dst > src

@@ -14,7 +14,7 @@ from threadpoolctl import threadpool_limits
 
 from threat_planner.core.config import PlannerConfig
 from threat_planner.core.methods import Clock, K_SWEEP, METHOD_FUNCTIONS, Problem
-from threat_planner.core.partition import build_network
+from threat_planner.core.partition import build_network, paper_network
 from threat_planner.core.result import PlanResult
 from threat_planner.core.search import edge_threat_costs
 from threat_planner.core.settings import METHODS
@@ -76,7 +76,10 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
 def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: PlannerConfig,
           progress: Callable[[int, int], None] | None) -> PlanResult:
     clock = Clock()
-    network = build_network(threats.positions, box, config.box_divisions)
+    if config.network == 'threats':
+        network = paper_network(threats.positions, box)
+    else:
+        network = build_network(threats.positions, box, config.box_divisions)
     clock.lap('partition_ms')
     edge_j = None
     if config.method != 'paper':

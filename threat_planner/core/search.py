@@ -118,6 +118,69 @@ def nearest_nodes(network: Network, point: NDArray, k: int) -> NDArray:
     return np.atleast_1d(idx).astype(np.int64)
 
 
+def spread_nodes(network: Network, point: NDArray, toward: NDArray, k: int) -> NDArray:
+    """Return k entry (or exit) candidates spread around a point, as the paper's Fig. 11.
+
+    The paper picks "by eye" nodes near the start that are neither too far away nor too
+    close to a threat. Here: nodes of cells with at least one threat vertex (the margin's
+    all-auxiliary slivers have no inradius and smooth to the same path) lying towards
+    ``toward``; the space around the axis point -> toward is split into k equal sectors,
+    starting upwards, and each sector gives its node nearest the point. Sectors without a
+    node are filled by the nearest remaining nodes.
+
+    Args:
+        network: The network.
+        point: The start (or goal) (3,) [m].
+        toward: The goal (or start) (3,) [m], which fixes the axis and the forward side.
+        k: How many candidates.
+
+    Returns:
+        Node indices, (min(k, M),), nearest first.
+    """
+    k = max(1, min(k, network.n_nodes))
+    real = (network.tetrahedra < network.n_threat_vertices).any(axis=1) & (network.radii > 0)
+    pool = np.flatnonzero(real) if real.sum() >= k else np.arange(network.n_nodes)
+    rel = network.nodes[pool] - point
+    dist = np.linalg.norm(rel, axis=1)
+    axis = np.asarray(toward, float) - point
+    length = float(np.linalg.norm(axis))
+    if length > 0:
+        axis = axis / length
+        ahead = rel @ axis > 0
+        if ahead.sum() >= k:
+            pool, rel, dist = pool[ahead], rel[ahead], dist[ahead]
+    else:
+        axis = np.array([1.0, 0.0, 0.0])
+    # Sector 0 starts at the world's up direction seen across the axis (x if the axis is up).
+    up = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    e1 = up - (up @ axis) * axis
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    phi = np.mod(np.arctan2(rel @ e2, rel @ e1) + np.pi / k, 2 * np.pi)
+    sector = np.minimum((phi / (2 * np.pi / k)).astype(np.int64), k - 1)
+    order = np.argsort(dist, kind='stable')
+    chosen: list[int] = []
+    for j in range(k):
+        in_j = order[sector[order] == j]
+        if len(in_j):
+            chosen.append(int(in_j[0]))
+    for i in order:
+        if len(chosen) == k:
+            break
+        if int(i) not in chosen:
+            chosen.append(int(i))
+    chosen.sort(key=lambda i: dist[i])
+    return pool[np.array(chosen, dtype=np.int64)]
+
+
+def entry_candidates(network: Network, point: NDArray, toward: NDArray, k: int,
+                     how: str) -> NDArray:
+    """Entry (or exit) candidates by ``how``: 'spread' (:func:`spread_nodes`) or 'nearest'."""
+    if how == 'nearest':
+        return nearest_nodes(network, point, k)
+    return spread_nodes(network, point, toward, k)
+
+
 def _graph(n: int, edges: NDArray, weights: NDArray) -> csr_matrix:
     # csgraph drops explicit zeros as "no edge", so coincident nodes get a tiny positive cost.
     wt = np.maximum(weights, 1e-12)

@@ -17,10 +17,12 @@ from typing import Optional
 
 from threat_planner.errors import InputError
 
-__all__ = ['METHODS', 'NODE_SETTINGS', 'PLANNER_SETTINGS', 'SETTINGS', 'Setting',
-           'params_file_text']
+__all__ = ['CANDIDATE_RULES', 'METHODS', 'NETWORKS', 'NODE_SETTINGS', 'PLANNER_SETTINGS',
+           'SETTINGS', 'Setting', 'params_file_text']
 
 METHODS = ('paper', 'improved', 'best')
+NETWORKS = ('box', 'threats')
+CANDIDATE_RULES = ('spread', 'nearest')
 
 
 @dataclass(frozen=True)
@@ -178,10 +180,22 @@ SETTINGS: tuple[Setting, ...] = (
             lo_open=True, cli='max-pitch'),
     Setting('max_turn_deg', float, 60.0, 'Turn limit between consecutive segments',
             unit='deg', lo=0.0, hi=180.0, lo_open=True, cli='max-turn'),
-    Setting('entry_candidates', int, 3, 'Nearest network nodes tried as entry and as exit',
+    Setting('entry_candidates', int, 3, 'Network nodes tried as entry and as exit',
             lo=1, hi=64, cli='entry-candidates'),
+    Setting('candidates', str, 'spread',
+            "How 'improved' picks entry/exit nodes: 'spread' (nearest node of each of K "
+            "sectors around the start-goal axis, margin slivers left out, as the paper's "
+            "Fig. 11) or 'nearest' (the K nearest nodes)", choices=CANDIDATE_RULES,
+            node=False, cli='candidates'),
+    Setting('network', str, 'box',
+            "Network: 'box' (threats plus the flight box's surface: covers the box, takes "
+            "flat or tiny inputs) or 'threats' (the paper's: threats only, their hull)",
+            choices=NETWORKS, node=False, cli='network'),
     Setting('routes', int, 6, "Distinct network routes screened by 'best' (plus the line)",
             lo=1, hi=32, node=False),
+    Setting('surface_seeds', bool, True,
+            "Also screen least-J routes over the box's surface lattice ('best' only)",
+            node=False),
     Setting('box_divisions', int, 2, 'Intervals per box edge of the auxiliary surface lattice',
             lo=1, hi=16, node=False),
     Setting('optimise', bool, True, "Run the direct J minimisation ('best' only)",
