@@ -143,6 +143,13 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
 _NO_PAIRS = np.zeros(0, np.int64)
 
 
+def _frozen(a: NDArray) -> NDArray:
+    """A read-only C-contiguous float view: numba compiles one signature for all callers."""
+    v = np.ascontiguousarray(a, float).view()
+    v.flags.writeable = False
+    return v
+
+
 def cost_gradient(points: NDArray, positions: NDArray, intensities: NDArray, w: float,
                   pairs: tuple[NDArray, NDArray] | None = None) -> tuple[float, NDArray]:
     """J of a polyline and its gradient, as :func:`cost.cost_and_gradient`, compiled.
@@ -180,11 +187,14 @@ def cost_gradient(points: NDArray, positions: NDArray, intensities: NDArray, w: 
             # An empty pair list means no threat counted, not every pair.
             positions = np.zeros((0, 3))
             seg = thr = _NO_PAIRS
-    j = _kernel(points, np.ascontiguousarray(positions, float),
-                np.ascontiguousarray(intensities, float), float(w), seg, thr, _C2, _C3, grad)
+    j = _kernel(points, _frozen(positions), _frozen(intensities), float(w), seg, thr,
+                _FROZEN_C2, _FROZEN_C3, grad)
     if not math.isfinite(j):
         grad[:] = 0.0
     return float(j), grad
+
+
+_FROZEN_C2, _FROZEN_C3 = _frozen(_C2), _frozen(_C3)
 
 
 def warm_up() -> None:

@@ -16,9 +16,9 @@ pitch and turn angles (:func:`~threat_planner.core.smoothing.check_angles`, meth
 segments over a 100 m field and ~1.3 m at 80.
 
 The optimiser sees the limits as smooth constraints g >= 0 (dimensionless, O(1)):
-climb ``sin(c) - dz/|d|``, dive ``sin(v) + dz/|d|``, radius ``1 - (R_min / R)^2`` written
-as ``1 - 4 R_min^2 |a x b|^2 / (|a|^2 |b|^2 |a + b|^2)`` (no square root, no kink at
-collinear points); the minimum altitude is a bound.
+climb ``sin(c) - dz/|d|``, dive ``sin(v) + dz/|d|``, radius ``1 - R_min / R`` written
+as ``1 - 2 R_min sqrt(|a x b|^2 / (|a|^2 |b|^2 |a + b|^2))`` (curvature, no division by a
+vanishing cross product); the minimum altitude is a bound.
 """
 
 from __future__ import annotations
@@ -250,8 +250,12 @@ def _blocks(points: NDArray, limits: FlightLimits
         den = np.maximum(aa * bb * cc, 1e-300)
         x = np.maximum(aa * bb - ab * ab, 0.0)
         rho = x / den
-        k4 = 4.0 * limits.min_turn_radius_m ** 2
-        values.append(1.0 - k4 * rho)
+        # g = 1 - R_min / R = 1 - 2 R_min sqrt(rho): linear in the curvature, so a sharp
+        # corner is a violation of a few units, not of hundreds. Its kink at collinear
+        # points lies where g = 1, far from active, where the penalty is zero anyway.
+        root = np.sqrt(rho + 1e-300)
+        values.append(1.0 - 2.0 * limits.min_turn_radius_m * root)
+        k4 = limits.min_turn_radius_m / root
         # rho = X / (A B C); X = |a|^2 |b|^2 - (a.b)^2, c = a + b.
         dx_a = 2.0 * (a * bb[:, None] - b * ab[:, None])
         dx_b = 2.0 * (b * aa[:, None] - a * ab[:, None])
@@ -260,7 +264,7 @@ def _blocks(points: NDArray, limits: FlightLimits
         drho_b = dx_b / den[:, None] - rho[:, None] * (2 * b / np.maximum(bb, 1e-300)[:, None]
                                                        + 2 * c / np.maximum(cc, 1e-300)[:, None])
         # a = x1 - x0, b = x2 - x1
-        deriv = -k4 * np.stack([-drho_a, drho_a - drho_b, drho_b], axis=1)
+        deriv = -k4[:, None, None] * np.stack([-drho_a, drho_a - drho_b, drho_b], axis=1)
         verts = np.stack([np.arange(n - 1), np.arange(1, n), np.arange(2, n + 1)], axis=1)
         blocks.append((np.arange(row, row + n - 1), verts, deriv))
         row += n - 1

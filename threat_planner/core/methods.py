@@ -7,7 +7,8 @@
   k swept over 500..3000 step 100 for least J among angle-feasible paths (Case 3).
 * ``best``: one J-weighted Dijkstra with the start and goal joined to K candidates each,
   several distinct routes plus the straight line screened by a coarse minimisation of J,
-  then the winner refined by L-BFGS-B on J itself within the box and the angle limits.
+  then the winner refined by L-BFGS-B on J itself within the box and the physical flight
+  limits (:mod:`.limits`; an augmented Lagrangian where they bind).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from numpy.typing import NDArray
 
 from threat_planner.core.config import PlannerConfig
 from threat_planner.core.cost import Cost, path_cost
+from threat_planner.core.limits import check_limits, FlightLimits, LimitCheck
 from threat_planner.core.optimisation import minimise_cost
 from threat_planner.core.partition import Network
 from threat_planner.core.search import (alternative_routes, dijkstra_pairs, EdgeCosts,
@@ -39,7 +41,7 @@ COARSE_TOLERANCE = 1e-4
 OPTIMISER_DENSE_PAIRS = 20_000
 #: Optimiser cut-off beyond that, in typical threat spacings.
 OPTIMISER_CUTOFF_SPACINGS = 3.0
-#: Screened basins refined, best first, until one meets the angle limits ('best').
+#: Screened basins refined, best first, until one meets the flight limits ('best').
 FEASIBILITY_TRIES = 3
 
 
@@ -78,6 +80,15 @@ class Problem:
         return path_cost(points, self.threats.positions, self.threats.intensities,
                          self.config.w)
 
+    @property
+    def limits(self) -> FlightLimits:
+        """The physical flight limits in force."""
+        return FlightLimits.of(self.config)
+
+    def check(self, points: NDArray) -> LimitCheck:
+        """A path's climb, dive, turn radius and altitude against the limits."""
+        return check_limits(points, self.limits, float(self.box.lo[2]))
+
 
 @dataclass
 class Candidate:
@@ -94,6 +105,9 @@ class Candidate:
     cost: Cost
     angles: AngleCheck
     seed: str = 'route 0'
+    limit_check: Optional[LimitCheck] = None
+    #: Relative J gap between the best and the second-best screened basin ('best').
+    basin_margin: float = float('inf')
 
 
 def _smooth_route(p: Problem, seq: list[int], k: float) -> Candidate:
@@ -113,7 +127,8 @@ def _smooth_route(p: Problem, seq: list[int], k: float) -> Candidate:
         c = p.cost(pts)
     return Candidate(seq=seq, initial=initial, smoothed=pts, smoothed_cost=c, final=pts, k=k,
                      steps=r.steps, converged=r.converged, cost=c,
-                     angles=check_angles(pts, cfg.max_pitch_deg, cfg.max_turn_deg))
+                     angles=check_angles(pts, cfg.max_pitch_deg, cfg.max_turn_deg),
+                     limit_check=p.check(pts))
 
 
 def _sweep_k(p: Problem, best: Candidate) -> Candidate:
@@ -203,7 +218,9 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     """Screen every route and the straight line coarsely, then refine the lowest-J one.
 
     Each route lies in its own basin of J (it passes the threats on its own sides); a cheap
-    coarse minimisation of each tells the basins apart before the fine one runs once.
+    coarse minimisation of each (box only, no flight limits) tells the basins apart before
+    the fine one runs, under the limits, once (or up to FEASIBILITY_TRIES times when the
+    limits cannot be met in the best basin).
     """
     cfg, threats, nodes = p.config, p.threats, p.network.nodes
     w = cfg.w
@@ -215,32 +232,60 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     for name, seq in seeds:
         initial = np.vstack([p.s, nodes[seq], p.t]) if seq else np.vstack([p.s, p.t])
         coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
-                               90.0, 180.0, cutoff=_optimiser_cutoff(COARSE_SEGMENTS, threats,
-                                                                     spacing),
+                               cutoff=_optimiser_cutoff(COARSE_SEGMENTS, threats, spacing),
                                tolerance=COARSE_TOLERANCE).points
         screened.append((p.cost(coarse).J, name, seq, coarse))
     screened.sort(key=lambda item: item[0])
+    margin = (screened[1][0] / screened[0][0] - 1.0 if len(screened) > 1
+              and np.isfinite(screened[0][0]) and screened[0][0] > 0 else float('inf'))
     p.clock.lap('screening_ms')
     best: Candidate | None = None
-    # Refine the best basin; if the angle limits cannot be met there, the next basins get
-    # a chance (a feasible path beats any infeasible one, then lower J wins).
+    # Refine the best basin; if the limits cannot be met there, the next basins get a
+    # chance (a feasible path beats any infeasible one, then lower J wins).
     for _, name, seq, coarse in screened[:FEASIBILITY_TRIES]:
-        opt = minimise_cost(resample(coarse, cfg.n_points), threats, w, bounds,
-                            cfg.max_pitch_deg, cfg.max_turn_deg,
-                            cutoff=_optimiser_cutoff(cfg.n_points, threats, spacing))
-        seq = seq or routes[0]   # the line won: report the best route as the initial path
-        cand = Candidate(seq=seq, initial=np.vstack([p.s, nodes[seq], p.t]), smoothed=None,
-                         smoothed_cost=None, final=opt.points, k=float('nan'), steps=0,
-                         converged=True, cost=p.cost(opt.points),
-                         angles=check_angles(opt.points, cfg.max_pitch_deg,
-                                             cfg.max_turn_deg), seed=name)
-        if best is None or ((cand.angles.feasible, -cand.cost.J)
-                            > (best.angles.feasible, -best.cost.J)):
+        cand = refine(p, resample(coarse, cfg.n_points), seq or routes[0], name)
+        cand.basin_margin = margin
+        if best is None or ((cand.limit_check.feasible, -cand.cost.J)
+                            > (best.limit_check.feasible, -best.cost.J)):
             best = cand
-        if best.angles.feasible:
+        if best.limit_check.feasible:
             break
     p.clock.lap('optimisation_ms')
     return best
+
+
+def refine(p: Problem, start: NDArray, seq: list[int], name: str,
+           tolerance: float = 1e-6) -> Candidate:
+    """Minimise J from a path of n_points segments inside the box and the flight limits.
+
+    Parameters
+    ----------
+    p : Problem
+        The problem.
+    start : ndarray
+        Starting path, (n+1, 3) [m], from S to T.
+    seq : list of int
+        Network route reported as the initial path (the line won: the best route).
+    name : str
+        Seed name reported in PlanResult.seed.
+    tolerance : float
+        Relative J decrease per iteration below which L-BFGS-B stops.
+
+    Returns
+    -------
+    Candidate
+
+    """
+    cfg = p.config
+    opt = minimise_cost(start, p.threats, cfg.w, p.box if cfg.confine_to_box else None,
+                        p.limits, tolerance=tolerance,
+                        cutoff=_optimiser_cutoff(cfg.n_points, p.threats,
+                                                 p.threats.typical_spacing(p.box)))
+    return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
+                     smoothed=None, smoothed_cost=None, final=opt.points, k=float('nan'),
+                     steps=0, converged=True, cost=p.cost(opt.points),
+                     angles=check_angles(opt.points, cfg.max_pitch_deg, cfg.max_turn_deg),
+                     seed=name, limit_check=p.check(opt.points))
 
 
 #: Method name -> the function that solves a Problem with it.
