@@ -48,7 +48,8 @@ def test_turn_radius_of_right_angle_corner():
     (0.0, 7.0, 0.0)])
 def test_climb_angle_of_known_segments(dz, horizontal, expected):
     # The horizontal length split over x and y: the angle only sees its norm.
-    pts = np.array([[1.0, 2.0, 3.0], [1.0 + 0.6 * horizontal, 2.0 + 0.8 * horizontal, 3.0 + dz]])
+    pts = np.array([[1.0, 2.0, 3.0],
+                    [1.0 + 0.6 * horizontal, 2.0 + 0.8 * horizontal, 3.0 + dz]])
     np.testing.assert_allclose(climb_angles(pts), [expected], atol=1e-12)
 
 
@@ -89,7 +90,8 @@ def test_constraint_jacobian_matches_finite_differences(limits, seed):
             h = 1e-6 * max(1.0, abs(pts[v, k]))
             up[v, k] += h
             dn[v, k] -= h
-            num[:, v, k] = (constraint_values(up, limits) - constraint_values(dn, limits)) / (2 * h)
+            diff = constraint_values(up, limits) - constraint_values(dn, limits)
+            num[:, v, k] = diff / (2 * h)
     scale = np.abs(num).max()
     np.testing.assert_allclose(jac, num, atol=1e-6 * scale)
     weights = np.random.default_rng(seed).normal(size=len(jac))

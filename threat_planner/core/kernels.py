@@ -144,7 +144,7 @@ _NO_PAIRS = np.zeros(0, np.int64)
 
 
 def _frozen(a: NDArray) -> NDArray:
-    """A read-only C-contiguous float view: numba compiles one signature for all callers."""
+    """Return a read-only C-contiguous float view: numba compiles one signature for all callers."""
     v = np.ascontiguousarray(a, float).view()
     v.flags.writeable = False
     return v

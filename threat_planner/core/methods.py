@@ -86,7 +86,7 @@ class Problem:
         return FlightLimits.of(self.config)
 
     def check(self, points: NDArray) -> LimitCheck:
-        """A path's climb, dive, turn radius and altitude against the limits."""
+        """Measure a path's climb, dive, turn radius and altitude against the limits."""
         return check_limits(points, self.limits, float(self.box.lo[2]))
 
 
@@ -236,8 +236,13 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
                                tolerance=COARSE_TOLERANCE).points
         screened.append((p.cost(coarse).J, name, seq, coarse))
     screened.sort(key=lambda item: item[0])
-    margin = (screened[1][0] / screened[0][0] - 1.0 if len(screened) > 1
-              and np.isfinite(screened[0][0]) and screened[0][0] > 0 else float('inf'))
+    # Lead of the best basin over the next distinct one (routes that screened into the
+    # same basin end within 1 % of the diagonal of each other): the warm-start rule.
+    margin = float('inf')
+    for j_other, _, _, other in screened[1:]:
+        if np.max(np.linalg.norm(other - screened[0][3], axis=1)) > 0.01 * p.box.diagonal:
+            margin = j_other / screened[0][0] - 1.0 if screened[0][0] > 0 else 0.0
+            break
     p.clock.lap('screening_ms')
     best: Candidate | None = None
     # Refine the best basin; if the limits cannot be met there, the next basins get a

@@ -92,7 +92,7 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
 
 def _plan_warm(previous: PlanResult, threats: ThreatField, s: NDArray, t: NDArray, box: Box,
                config: PlannerConfig) -> PlanResult | str:
-    """A warm replan from the previous plan, or the reason to plan cold."""
+    """Replan warm from the previous plan, or return the reason to plan cold."""
     clock = Clock()
     path, note = warm_path(previous, threats, s, t, box, config)
     if path is None:
@@ -129,7 +129,7 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
 
 
 def _result(problem: Problem, best: Candidate, warm_note: str = '') -> PlanResult:
-    """The PlanResult of a problem's chosen candidate."""
+    """Build the PlanResult of a problem's chosen candidate."""
     config, network, edge_j = problem.config, problem.network, problem.edge_j
     timings = dict(problem.clock.ms)
     timings['total_ms'] = float(sum(problem.clock.ms.values()))

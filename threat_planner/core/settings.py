@@ -16,7 +16,8 @@ from typing import Optional
 
 from threat_planner.errors import InputError
 
-__all__ = ['METHODS', 'NODE_SETTINGS', 'PHYSICAL_LIMITS', 'PLANNER_SETTINGS', 'SETTINGS', 'Setting',
+__all__ = ['METHODS', 'NODE_SETTINGS', 'PHYSICAL_LIMITS', 'PLANNER_SETTINGS', 'SETTINGS',
+           'Setting',
            'params_file_text']
 
 METHODS = ('paper', 'improved', 'best')

@@ -44,7 +44,7 @@ def _project(path: NDArray, point: NDArray) -> tuple[int, NDArray, float]:
 
 def warm_path(previous: object, threats: ThreatField, s: NDArray, t: NDArray, box: Box,
               config: object) -> tuple[NDArray | None, str]:
-    """The starting path of a warm replan, or None with the reason it must be cold.
+    """Return the starting path of a warm replan, or None and why it must be cold.
 
     Parameters
     ----------
