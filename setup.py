@@ -16,7 +16,7 @@ setup(
         ('share/' + package_name + '/scenarios', glob('test/data/*.yaml')),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'networkx', 'PyYAML', 'matplotlib', 'tqdm',
-                      'threadpoolctl'],
+                      'threadpoolctl', 'numba'],
     extras_require={
         'ros': [
             'ros-jazzy-rclpy[fastrtps]',

@@ -1,29 +1,13 @@
-"""Direct J minimisation within the box and the angle limits."""
+"""Direct J minimisation within the box and the physical flight limits."""
 
 import numpy as np
 import pytest
 
 from threat_planner.core.cost import path_cost
-from threat_planner.core.optimisation import angle_constraints, minimise_cost
-from threat_planner.core.smoothing import check_angles, resample
+from threat_planner.core.limits import check_limits, FlightLimits
+from threat_planner.core.optimisation import minimise_cost
+from threat_planner.core.smoothing import resample
 from threat_planner.core.threats import Box, ThreatField
-
-
-def test_angle_constraint_jacobian_matches_finite_differences():
-    rng = np.random.default_rng(0)
-    pts = rng.uniform(0, 10, (7, 3))
-    g, jac = angle_constraints(pts, 30.0, 45.0)
-    num = np.zeros_like(jac)
-    for j in range(jac.shape[1]):
-        d = np.zeros(jac.shape[1])
-        d[j] = 1e-6
-        up = pts.copy()
-        up[1:-1] += d.reshape(-1, 3)
-        dn = pts.copy()
-        dn[1:-1] -= d.reshape(-1, 3)
-        num[:, j] = (angle_constraints(up, 30, 45)[0] - angle_constraints(dn, 30, 45)[0]) / 2e-6
-    assert np.max(np.abs(num - jac)) < 1e-5 * max(1.0, np.max(np.abs(jac)))
-    assert g.shape == (2 * 6 - 1,)
 
 
 @pytest.fixture
@@ -36,22 +20,31 @@ def problem():
 
 def test_minimisation_lowers_j_and_keeps_box_and_limits(problem):
     threats, box, start, goal = problem
-    x0 = resample(np.vstack([start, [60.0, 40.0, 55.0], goal]), 20)
-    res = minimise_cost(x0, threats, 0.5, box, max_pitch_deg=20.0, max_turn_deg=30.0)
+    x0 = resample(np.vstack([start, [60.0, 40.0, 65.0], goal]), 20)
+    limits = FlightLimits(8.0, 8.0, 20.0, 0.0)
+    res = minimise_cost(x0, threats, 0.5, box, limits)
     j0 = path_cost(x0, threats.positions, threats.intensities, 0.5).J
     j1 = path_cost(res.points, threats.positions, threats.intensities, 0.5).J
     assert j1 < 0.9 * j0
     assert np.all(res.points >= box.lo - 1e-9) and np.all(res.points <= box.hi + 1e-9)
-    assert check_angles(res.points, 20.0, 30.0).feasible
+    assert check_limits(res.points, limits, 0.0).feasible
+    assert not check_limits(x0, limits, 0.0).feasible
     assert np.allclose(res.points[[0, -1]], x0[[0, -1]])
+
+
+def test_minimum_altitude_is_a_bound(problem):
+    threats, box, start, goal = problem
+    x0 = resample(np.vstack([start, [60.0, 40.0, 20.0], goal]), 16)
+    res = minimise_cost(x0, threats, 0.5, box, FlightLimits(min_altitude_m=45.0))
+    assert np.all(res.points[1:-1, 2] >= 45.0 - 1e-9)
 
 
 def test_box_binds_when_the_threat_fills_it(problem):
     threats, box, start, goal = problem
     small = Box.from_corners([0, 0, 45], [100, 100, 55])
     x0 = resample(np.vstack([start, [60.0, 40.0, 50.0], goal]), 16)
-    inside = minimise_cost(x0, threats, 0.8, small, 90.0, 180.0)
-    free = minimise_cost(x0, threats, 0.8, None, 90.0, 180.0)
+    inside = minimise_cost(x0, threats, 0.8, small)
+    free = minimise_cost(x0, threats, 0.8, None)
     assert np.all(inside.points[:, 2] <= 55 + 1e-9)
     j_in = path_cost(inside.points, threats.positions, threats.intensities, 0.8).J
     j_free = path_cost(free.points, threats.positions, threats.intensities, 0.8).J

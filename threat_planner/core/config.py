@@ -29,6 +29,11 @@ class PlannerConfig:
         n_points: Number of chain segments n (the chain has n+1 points).
         max_pitch_deg: Pitch limit [deg].
         max_turn_deg: Turn (steering) limit between consecutive segments [deg].
+        max_climb_deg: Steepest climb of a segment ('best') [deg]; 90 = off.
+        max_dive_deg: Steepest dive of a segment ('best') [deg]; 90 = off.
+        min_turn_radius_m: Smallest turn radius through 3 consecutive points ('best')
+            [m]; 0 = off.
+        min_altitude_m: Lowest height above the box floor ('best') [m]; 0 = off.
         entry_candidates: K nodes tried as entry and as exit (Case 1).
         candidates: How 'improved' picks them: 'spread' (Fig. 11) or 'nearest'.
         network: 'box' (threats and the box surface) or 'threats' (the paper's).
@@ -51,6 +56,10 @@ class PlannerConfig:
     n_points: int = _D['n_points']
     max_pitch_deg: float = _D['max_pitch_deg']
     max_turn_deg: float = _D['max_turn_deg']
+    max_climb_deg: float = _D['max_climb_deg']
+    max_dive_deg: float = _D['max_dive_deg']
+    min_turn_radius_m: float = _D['min_turn_radius_m']
+    min_altitude_m: float = _D['min_altitude_m']
     entry_candidates: int = _D['entry_candidates']
     candidates: str = _D['candidates']
     network: str = _D['network']

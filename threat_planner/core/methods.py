@@ -8,7 +8,8 @@
   paths (Case 3).
 * ``best``: one J-weighted Dijkstra with the start and goal joined to K candidates each,
   several distinct routes plus the straight line screened by a coarse minimisation of J,
-  then the winner refined by L-BFGS-B on J itself within the box and the angle limits.
+  then the winner refined by L-BFGS-B on J itself within the box and the physical flight
+  limits (:mod:`.limits`; an augmented Lagrangian where they bind).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from numpy.typing import NDArray
 
 from threat_planner.core.config import PlannerConfig
 from threat_planner.core.cost import Cost, path_cost
+from threat_planner.core.limits import check_limits, FlightLimits, LimitCheck
 from threat_planner.core.optimisation import minimise_cost
 from threat_planner.core.partition import Network
 from threat_planner.core.seeds import surface_routes
@@ -41,7 +43,7 @@ COARSE_TOLERANCE = 1e-4
 OPTIMISER_DENSE_PAIRS = 20_000
 #: Optimiser cut-off beyond that, in typical threat spacings.
 OPTIMISER_CUTOFF_SPACINGS = 3.0
-#: Screened basins refined, best first, until one meets the angle limits ('best').
+#: Screened basins refined, best first, until one meets the flight limits ('best').
 FEASIBILITY_TRIES = 3
 
 
@@ -80,6 +82,15 @@ class Problem:
         return path_cost(points, self.threats.positions, self.threats.intensities,
                          self.config.w)
 
+    @property
+    def limits(self) -> FlightLimits:
+        """The physical flight limits in force."""
+        return FlightLimits.of(self.config)
+
+    def check(self, points: NDArray) -> LimitCheck:
+        """Measure a path's climb, dive, turn radius and altitude against the limits."""
+        return check_limits(points, self.limits, float(self.box.lo[2]))
+
 
 @dataclass
 class Candidate:
@@ -96,6 +107,9 @@ class Candidate:
     cost: Cost
     angles: AngleCheck
     seed: str = 'route 0'
+    limit_check: Optional[LimitCheck] = None
+    #: Relative J gap between the best and the second-best screened basin ('best').
+    basin_margin: float = float('inf')
 
 
 def _smooth_route(p: Problem, seq: list[int], k: float) -> Candidate:
@@ -115,7 +129,8 @@ def _smooth_route(p: Problem, seq: list[int], k: float) -> Candidate:
         c = p.cost(pts)
     return Candidate(seq=seq, initial=initial, smoothed=pts, smoothed_cost=c, final=pts, k=k,
                      steps=r.steps, converged=r.converged, cost=c,
-                     angles=check_angles(pts, cfg.max_pitch_deg, cfg.max_turn_deg))
+                     angles=check_angles(pts, cfg.max_pitch_deg, cfg.max_turn_deg),
+                     limit_check=p.check(pts))
 
 
 def _sweep_k(p: Problem, best: Candidate) -> Candidate:
@@ -205,7 +220,9 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     """Screen every route and the straight line coarsely, then refine the lowest-J one.
 
     Each route lies in its own basin of J (it passes the threats on its own sides); a cheap
-    coarse minimisation of each tells the basins apart before the fine one runs once.
+    coarse minimisation of each (box only, no flight limits) tells the basins apart before
+    the fine one runs, under the limits, once (or up to FEASIBILITY_TRIES times when the
+    limits cannot be met in the best basin).
     """
     cfg, threats, nodes = p.config, p.threats, p.network.nodes
     w = cfg.w
@@ -217,8 +234,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     screened = []
     for name, seq, initial in seeds:
         coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
-                               90.0, 180.0, cutoff=_optimiser_cutoff(COARSE_SEGMENTS, threats,
-                                                                     spacing),
+                               cutoff=_optimiser_cutoff(COARSE_SEGMENTS, threats, spacing),
                                tolerance=COARSE_TOLERANCE).points
         screened.append((p.cost(coarse).J, name, seq, coarse))
     # --- issue 11 global search (branch paperfaith): routes along the box's faces and
@@ -229,27 +245,61 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
                      enumerate(surface_routes(threats, p.s, p.t, p.box, w))]
     # --- end of the global-search hook
     screened.sort(key=lambda item: item[0])
+    # Lead of the best basin over the next distinct one (routes that screened into the
+    # same basin end within 1 % of the diagonal of each other): the warm-start rule.
+    margin = float('inf')
+    for j_other, _, _, other in screened[1:]:
+        if np.max(np.linalg.norm(other - screened[0][3], axis=1)) > 0.01 * p.box.diagonal:
+            margin = j_other / screened[0][0] - 1.0 if screened[0][0] > 0 else 0.0
+            break
     p.clock.lap('screening_ms')
     best: Candidate | None = None
-    # Refine the best basin; if the angle limits cannot be met there, the next basins get
-    # a chance (a feasible path beats any infeasible one, then lower J wins).
+    # Refine the best basin; if the limits cannot be met there, the next basins get a
+    # chance (a feasible path beats any infeasible one, then lower J wins).
     for _, name, seq, coarse in screened[:FEASIBILITY_TRIES]:
-        opt = minimise_cost(resample(coarse, cfg.n_points), threats, w, bounds,
-                            cfg.max_pitch_deg, cfg.max_turn_deg,
-                            cutoff=_optimiser_cutoff(cfg.n_points, threats, spacing))
-        seq = seq or routes[0]   # the line won: report the best route as the initial path
-        cand = Candidate(seq=seq, initial=np.vstack([p.s, nodes[seq], p.t]), smoothed=None,
-                         smoothed_cost=None, final=opt.points, k=float('nan'), steps=0,
-                         converged=True, cost=p.cost(opt.points),
-                         angles=check_angles(opt.points, cfg.max_pitch_deg,
-                                             cfg.max_turn_deg), seed=name)
-        if best is None or ((cand.angles.feasible, -cand.cost.J)
-                            > (best.angles.feasible, -best.cost.J)):
+        cand = refine(p, resample(coarse, cfg.n_points), seq or routes[0], name)
+        cand.basin_margin = margin
+        if best is None or ((cand.limit_check.feasible, -cand.cost.J)
+                            > (best.limit_check.feasible, -best.cost.J)):
             best = cand
-        if best.angles.feasible:
+        if best.limit_check.feasible:
             break
     p.clock.lap('optimisation_ms')
     return best
+
+
+def refine(p: Problem, start: NDArray, seq: list[int], name: str,
+           tolerance: float = 1e-6) -> Candidate:
+    """Minimise J from a path of n_points segments inside the box and the flight limits.
+
+    Parameters
+    ----------
+    p : Problem
+        The problem.
+    start : ndarray
+        Starting path, (n+1, 3) [m], from S to T.
+    seq : list of int
+        Network route reported as the initial path (the line won: the best route).
+    name : str
+        Seed name reported in PlanResult.seed.
+    tolerance : float
+        Relative J decrease per iteration below which L-BFGS-B stops.
+
+    Returns
+    -------
+    Candidate
+
+    """
+    cfg = p.config
+    opt = minimise_cost(start, p.threats, cfg.w, p.box if cfg.confine_to_box else None,
+                        p.limits, tolerance=tolerance,
+                        cutoff=_optimiser_cutoff(cfg.n_points, p.threats,
+                                                 p.threats.typical_spacing(p.box)))
+    return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
+                     smoothed=None, smoothed_cost=None, final=opt.points, k=float('nan'),
+                     steps=0, converged=True, cost=p.cost(opt.points),
+                     angles=check_angles(opt.points, cfg.max_pitch_deg, cfg.max_turn_deg),
+                     seed=name, limit_check=p.check(opt.points))
 
 
 #: Method name -> the function that solves a Problem with it.

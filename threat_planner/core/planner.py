@@ -13,12 +13,14 @@ from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
 from threat_planner.core.config import PlannerConfig
-from threat_planner.core.methods import Clock, K_SWEEP, METHOD_FUNCTIONS, Problem
+from threat_planner.core.methods import Candidate, Clock, K_SWEEP, METHOD_FUNCTIONS, Problem
+from threat_planner.core.methods import refine
 from threat_planner.core.partition import build_network, paper_network
 from threat_planner.core.result import PlanResult
 from threat_planner.core.search import edge_threat_costs
 from threat_planner.core.settings import METHODS
 from threat_planner.core.threats import as_point, Box, ThreatField
+from threat_planner.core.warm import warm_path
 from threat_planner.errors import InputError, PlanningError
 
 __all__ = ['K_SWEEP', 'METHODS', 'PlanResult', 'PlannerConfig', 'check_endpoints', 'plan']
@@ -47,7 +49,8 @@ def check_endpoints(start: ArrayLike, goal: ArrayLike, box: Box,
 
 def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
          config: PlannerConfig = PlannerConfig(),
-         progress: Callable[[int, int], None] | None = None) -> PlanResult:
+         progress: Callable[[int, int], None] | None = None,
+         warm_start: PlanResult | None = None) -> PlanResult:
     """Plan a path from start to goal through the threat field.
 
     Args:
@@ -57,6 +60,8 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         box: Flight box.
         config: Planner settings.
         progress: Optional callback (done, total) for long sweeps.
+        warm_start: The previous plan; after a small change (core/warm.py states the
+            rule) its path is refined instead of planning from scratch.
 
     Returns:
         The PlanResult.
@@ -66,11 +71,40 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         PlanningError: if no path exists on the network.
     """
     config.validated()
+    height = float(box.hi[2] - box.lo[2])
+    if config.min_altitude_m >= height and config.min_altitude_m > 0:
+        raise InputError(f'min_altitude_m: must be below the box height {height:g}, '
+                         f'got {float(config.min_altitude_m):g}')
     s, t = check_endpoints(start, goal, box, threats)
     # The optimisers make thousands of tiny BLAS calls; a threaded BLAS spends longer waking
     # its threads than computing, and far longer when the cores are busy (measured: 4x).
     with threadpool_limits(1, user_api='blas'):
-        return _plan(threats, s, t, box, config, progress)
+        note = ''
+        if warm_start is not None:
+            warm = _plan_warm(warm_start, threats, s, t, box, config)
+            if isinstance(warm, PlanResult):
+                return warm
+            note = warm
+        result = _plan(threats, s, t, box, config, progress)
+        result.warm_note = note
+        return result
+
+
+def _plan_warm(previous: PlanResult, threats: ThreatField, s: NDArray, t: NDArray, box: Box,
+               config: PlannerConfig) -> PlanResult | str:
+    """Replan warm from the previous plan, or return the reason to plan cold."""
+    clock = Clock()
+    path, note = warm_path(previous, threats, s, t, box, config)
+    if path is None:
+        return note
+    problem = Problem(threats=threats, s=s, t=t, box=box, config=config,
+                      network=previous.network, edge_j=None, clock=clock)
+    cand = refine(problem, path, previous.node_sequence, previous.seed, tolerance=1e-8)
+    cand.basin_margin = previous.basin_margin
+    clock.lap('warm_ms')
+    if previous.feasible and not cand.limit_check.feasible:
+        return 'cold: the warm result broke a limit the previous plan met'
+    return _result(problem, cand, note)
 
 
 def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: PlannerConfig,
@@ -94,14 +128,24 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
             f'cost: no path with a finite J was found (J = {best.cost.J}); the intensities '
             f'(largest {float(threats.intensities.max(initial=0.0)):.3g}) overflow double '
             'precision or a threat blocks the way')
-    timings = dict(clock.ms)
-    timings['total_ms'] = float(sum(clock.ms.values()))
+    return _result(problem, best)
+
+
+def _result(problem: Problem, best: Candidate, warm_note: str = '') -> PlanResult:
+    """Build the PlanResult of a problem's chosen candidate."""
+    config, network, edge_j = problem.config, problem.network, problem.edge_j
+    timings = dict(problem.clock.ms)
+    timings['total_ms'] = float(sum(problem.clock.ms.values()))
     seq = best.seq
+    initial = best.initial
     return PlanResult(
         method=config.method, w=config.w, network=network, entry=seq[0] if seq else -1,
-        exit=seq[-1] if seq else -1, node_sequence=list(seq), initial_path=best.initial,
-        smoothed_path=best.smoothed, path=best.final, initial_cost=problem.cost(best.initial),
+        exit=seq[-1] if seq else -1, node_sequence=list(seq), initial_path=initial,
+        smoothed_path=best.smoothed, path=best.final, initial_cost=problem.cost(initial),
         smoothed_cost=best.smoothed_cost, cost=best.cost, k=best.k, angles=best.angles,
         smoothing_steps=best.steps, smoothing_converged=best.converged,
         candidates=problem.candidates, k_sweep=problem.k_sweep, seed=best.seed,
-        edge_cutoff=None if edge_j is None else edge_j.radius, timings_ms=timings)
+        edge_cutoff=None if edge_j is None else edge_j.radius, timings_ms=timings,
+        limits=problem.limits, limit_check=best.limit_check or problem.check(best.final),
+        warm=bool(warm_note), warm_note=warm_note, basin_margin=best.basin_margin,
+        problem=(problem.threats, problem.s, problem.t, problem.box, config))

@@ -8,8 +8,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from threat_planner.core.cost import Cost
+from threat_planner.core.limits import FlightLimits, LimitCheck
 from threat_planner.core.partition import Network
 from threat_planner.core.smoothing import AngleCheck
+from threat_planner.core.threats import Box, ThreatField
 
 __all__ = ['PlanResult']
 
@@ -41,6 +43,12 @@ class PlanResult:
         seed: Which start the final path grew from ('route i' or 'straight line').
         edge_cutoff: Cut-off radius of the edge costs [m], None if exact.
         timings_ms: Wall time per stage [ms].
+        limits: Physical flight limits in force (method 'best').
+        limit_check: The final path's climb, dive, turn radius and altitude against them.
+        warm: Whether the plan was warm-started from a previous one (see core/warm.py).
+        warm_note: Why a warm start was used or refused ('' for a cold plan).
+        basin_margin: Relative J gap between the best and second-best screened basin.
+        problem: (threats, start, goal, box, config) planned, kept for warm starts.
     """
 
     method: str
@@ -64,10 +72,22 @@ class PlanResult:
     seed: str = 'route 0'
     edge_cutoff: float | None = None
     timings_ms: dict[str, float] = field(default_factory=dict)
+    limits: FlightLimits = field(default_factory=FlightLimits)
+    limit_check: LimitCheck | None = None
+    warm: bool = False
+    warm_note: str = ''
+    basin_margin: float = float('inf')
+    problem: tuple[ThreatField, NDArray, NDArray, Box, object] | None = None
 
     @property
     def feasible(self) -> bool:
-        """Final path meets both angle limits."""
+        """Final path meets the method's limits.
+
+        'best' is held to the physical limits (climb, dive, turn radius, altitude);
+        'paper' and 'improved' to the paper's per-vertex pitch and turn angles.
+        """
+        if self.method == 'best' and self.limit_check is not None:
+            return self.limit_check.feasible
         return self.angles.feasible
 
     def summary(self) -> dict:
@@ -95,5 +115,9 @@ class PlanResult:
             'smoothing': {'steps': self.smoothing_steps,
                           'converged': self.smoothing_converged},
             'edge_cutoff_m': self.edge_cutoff,
+            'limits': self.limits.as_dict(),
+            'path_limits': None if self.limit_check is None else self.limit_check.as_dict(),
+            'worst_violation': None if self.limit_check is None else self.limit_check.worst,
+            'warm': self.warm,
             'timings_ms': self.timings_ms,
         }

@@ -1,0 +1,113 @@
+"""Physical flight limits: the metrics, the constraints and their Jacobians."""
+
+import math
+
+from hypothesis import given, settings, strategies as st
+import numpy as np
+import pytest
+
+from threat_planner.core.limits import (check_limits, climb_angles, constraint_jacobian,
+                                        constraint_values, constraint_vjp, FlightLimits,
+                                        turn_radii)
+
+ALL_ON = FlightLimits(20.0, 30.0, 15.0, 0.0)
+
+
+@given(st.floats(0.5, 500.0), st.floats(1.0, 170.0), st.integers(3, 40),
+       st.floats(-math.pi, math.pi), st.floats(-1.4, 1.4))
+@settings(max_examples=60, deadline=None)
+def test_turn_radius_of_points_on_a_circle_is_its_radius(radius, arc_deg, n, yaw, tilt):
+    """Any three consecutive points on a circle of radius R, in any plane, give R."""
+    phi = np.radians(np.linspace(0.0, arc_deg, n))
+    local = np.stack([radius * np.cos(phi), radius * np.sin(phi), np.zeros(n)], axis=1)
+    cy, sy, ct, st_ = math.cos(yaw), math.sin(yaw), math.cos(tilt), math.sin(tilt)
+    rot = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]]) @ np.array(
+        [[1, 0, 0], [0, ct, -st_], [0, st_, ct]])
+    pts = local @ rot.T + np.array([3.0, -7.0, 11.0])
+    np.testing.assert_allclose(turn_radii(pts), radius, rtol=1e-7)
+
+
+def test_turn_radius_straight_is_infinite_and_hairpin_zero():
+    line = np.array([[0, 0, 0], [1, 1, 1], [3, 3, 3.0]])
+    assert np.all(np.isinf(turn_radii(line)))
+    back = np.array([[0, 0, 0], [2, 0, 0], [1, 0, 0.0]])
+    assert turn_radii(back)[0] == 0.0
+    # A repeated vertex is skipped: the circle goes through the distinct neighbours.
+    rep = np.array([[1, 0, 0], [0, 1, 0], [0, 1, 0], [-1, 0, 0.0]])
+    np.testing.assert_allclose(turn_radii(rep), [1.0])
+
+
+def test_turn_radius_of_right_angle_corner():
+    """Legs of length L at 90 deg: the circle through the three points has R = L / sqrt 2."""
+    pts = np.array([[0, 0, 0], [4, 0, 0], [4, 4, 0.0]])
+    np.testing.assert_allclose(turn_radii(pts), [4 / math.sqrt(2)])
+
+
+@pytest.mark.parametrize('dz, horizontal, expected', [
+    (1.0, 1.0, 45.0), (-1.0, 1.0, -45.0), (math.sqrt(3), 1.0, 60.0), (5.0, 0.0, 90.0),
+    (0.0, 7.0, 0.0)])
+def test_climb_angle_of_known_segments(dz, horizontal, expected):
+    # The horizontal length split over x and y: the angle only sees its norm.
+    pts = np.array([[1.0, 2.0, 3.0],
+                    [1.0 + 0.6 * horizontal, 2.0 + 0.8 * horizontal, 3.0 + dz]])
+    np.testing.assert_allclose(climb_angles(pts), [expected], atol=1e-12)
+
+
+def test_check_reports_the_worst_violation():
+    pts = np.array([[0, 0, 0], [10, 0, 10], [10, 10, 12.0], [20, 10, 12.0]])  # 45 deg climb
+    check = check_limits(pts, FlightLimits(20.0, 30.0, 5.0, 0.0), 0.0)
+    assert not check.feasible
+    np.testing.assert_allclose(check.violations['climb_deg'], 25.0)
+    assert check.climb_deg == pytest.approx(45.0)
+    assert check.worst == 'climb_deg'
+    ok = check_limits(pts, FlightLimits(), 0.0)
+    assert ok.feasible and ok.worst is None and ok.violations == {}
+
+
+def test_altitude_applies_to_interior_vertices_only():
+    pts = np.array([[0, 0, 0.0], [10, 0, 3.0], [20, 0, 0.0]])
+    check = check_limits(pts, FlightLimits(min_altitude_m=5.0), 0.0)
+    assert check.violations == pytest.approx({'altitude_m': 2.0})
+    assert check_limits(pts, FlightLimits(min_altitude_m=3.0), 0.0).feasible
+
+
+def _random_path(seed, n):
+    rng = np.random.default_rng(seed)
+    return np.cumsum(rng.normal(0.0, 3.0, (n + 1, 3)) + [4.0, 1.0, 0.5], axis=0)
+
+
+@pytest.mark.parametrize('limits', [ALL_ON, FlightLimits(10.0, 90.0, 0.0, 0.0),
+                                    FlightLimits(90.0, 5.0, 0.0, 0.0),
+                                    FlightLimits(90.0, 90.0, 40.0, 0.0)])
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_constraint_jacobian_matches_finite_differences(limits, seed):
+    pts = _random_path(seed, 7)
+    jac = constraint_jacobian(pts, limits)
+    num = np.zeros_like(jac)
+    for v in range(len(pts)):
+        for k in range(3):
+            up, dn = pts.copy(), pts.copy()
+            h = 1e-6 * max(1.0, abs(pts[v, k]))
+            up[v, k] += h
+            dn[v, k] -= h
+            diff = constraint_values(up, limits) - constraint_values(dn, limits)
+            num[:, v, k] = diff / (2 * h)
+    scale = np.abs(num).max()
+    np.testing.assert_allclose(jac, num, atol=1e-6 * scale)
+    weights = np.random.default_rng(seed).normal(size=len(jac))
+    np.testing.assert_allclose(constraint_vjp(pts, limits, weights)[1],
+                               np.einsum('m,mvk->vk', weights, jac), atol=1e-12 * scale * 50)
+
+
+@given(st.integers(0, 10_000), st.integers(2, 12))
+@settings(max_examples=40, deadline=None)
+def test_constraints_agree_with_the_metrics(seed, n):
+    """g >= 0 exactly where the measured climb, dive and radius are within the limits."""
+    pts = _random_path(seed, n)
+    g = constraint_values(pts, ALL_ON)
+    ang = climb_angles(pts)
+    rad = turn_radii(pts)
+    np.testing.assert_array_equal(g[:n] >= 0, ang <= 20.0 + 1e-9)
+    np.testing.assert_array_equal(g[n:2 * n] >= 0, -ang <= 30.0 + 1e-9)
+    close = np.abs(rad - 15.0) < 1e-9
+    np.testing.assert_array_equal((g[2 * n:] >= 0)[~close], (rad >= 15.0)[~close])
