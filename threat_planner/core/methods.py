@@ -247,9 +247,12 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     screened.sort(key=lambda item: item[0])
     # Lead of the best basin over the next distinct one (routes that screened into the
     # same basin end within 1 % of the diagonal of each other): the warm-start rule.
+    # (Surface routes have their own point counts: compare at the coarse resolution.)
     margin = float('inf')
+    lead = resample(screened[0][3], COARSE_SEGMENTS)
     for j_other, _, _, other in screened[1:]:
-        if np.max(np.linalg.norm(other - screened[0][3], axis=1)) > 0.01 * p.box.diagonal:
+        gap = np.linalg.norm(resample(other, COARSE_SEGMENTS) - lead, axis=1)
+        if np.max(gap) > 0.01 * p.box.diagonal:
             margin = j_other / screened[0][0] - 1.0 if screened[0][0] > 0 else 0.0
             break
     p.clock.lap('screening_ms')
