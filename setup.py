@@ -26,6 +26,7 @@ setup(
             'ros-jazzy-visualization-msgs',
             'ros-jazzy-std-msgs',
             'ros-jazzy-diagnostic-msgs',
+            'ros-jazzy-lifecycle-msgs',
         ],
         'record': ['mcap', 'mcap-ros2-support'],
         'test': ['pytest', 'hypothesis', 'flake8', 'pydocstyle', 'rosbags', 'colcon-core',
@@ -42,6 +43,7 @@ setup(
         'console_scripts': [
             'threat-planner = threat_planner.cli:main',
             'planner_node = threat_planner.ros.node:main',
+            'planner_lifecycle_node = threat_planner.ros.lifecycle:main',
             'threat_publisher = threat_planner.ros.publisher:main',
             'threat_planner_demo = threat_planner.ros.demo:main',
         ],
