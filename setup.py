@@ -13,6 +13,8 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
+        ('share/' + package_name + '/foxglove', glob('foxglove/*.json')),
         ('share/' + package_name + '/scenarios', glob('test/data/*.yaml')),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'networkx', 'PyYAML', 'matplotlib', 'tqdm',
