@@ -102,3 +102,9 @@ def test_request_is_answered_while_a_long_topic_plan_runs(node):
     slow = client.wait_for(topic, lambda m: info(m)['method'] == 'improved', after=count,
                            timeout=120.0)
     assert info(slow)['level'] != 'ERROR'
+
+
+def test_plan_info_says_cold_or_warm_with_the_timings(node):
+    client, _, _, _ = node
+    last = info(client.last(f'{NS}/plan_info'))
+    assert last['start'] in ('warm', 'cold') and float(last['total_ms']) > 0
