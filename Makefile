@@ -7,9 +7,12 @@ STAMP := $(VENV)/.installed
 .PHONY: venv demo plan-demo test bench clean
 
 $(STAMP): setup.py setup.cfg package.xml
+	@echo "[1/3] creating $(VENV)"
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[ros,record,test,bench]'
+	@echo "[2/3] upgrading pip"
+	$(BIN)/pip install --progress-bar on --upgrade pip
+	@echo "[3/3] installing threat_planner with ROS 2 wheels (about a minute)"
+	$(BIN)/pip install --progress-bar on -e '.[ros,record,test,bench]'
 	touch $(STAMP)
 
 venv: $(STAMP)

@@ -74,3 +74,12 @@ def test_paper_reproduction_writes_tables_and_figures(tmp_path):
     pngs = sorted(f.name for f in tmp_path.glob('*.png'))
     assert pngs == ['fig12_w0.2.png', 'fig13_w0.5.png', 'fig14_w0.8.png', 'fig8_network.png',
                     'fig9_dijkstra.png']
+
+
+def test_no_arguments_print_usage_and_subcommands_and_exit_2():
+    proc = subprocess.run([sys.executable, '-m', 'threat_planner.cli'], capture_output=True,
+                          text=True, cwd=str(DATA.parent.parent), timeout=60)
+    assert proc.returncode == 2 and proc.stdout == ''
+    assert proc.stderr.startswith('usage: threat-planner')
+    for command in ('plan', 'paper', 'replay'):
+        assert command in proc.stderr

@@ -63,3 +63,33 @@ def test_unreadable_and_invalid_files(tmp_path):
     scalar.write_text('42\n')
     with pytest.raises(ScenarioError, match='mapping'):
         load_scenario(scalar)
+
+
+@pytest.mark.parametrize('edit, expected', [
+    (lambda d: d.update(frameid='map'), 'unknown field "frameid"; did you mean "frame_id"'),
+    (lambda d: d.update(nmae='x'), 'unknown field "nmae"; did you mean "name"'),
+    (lambda d: d['threats'][0].update(radius=3.0),
+     'unknown field "threats\\[0\\].radius"; did you mean "lethal_radius"'),
+    (lambda d: d['bounds'].update(maxx=[1, 1, 1]), 'unknown field "bounds.maxx"; did you mean'),
+    (lambda d: d.update(colour='red'), 'unknown field "colour" \\(known: name'),
+])
+def test_unknown_keys_are_named_with_a_suggestion(edit, expected):
+    data = load_scenario(DATA / 'uniform20_0.yaml').to_dict()
+    edit(data)
+    with pytest.raises(ScenarioError, match=expected):
+        scenario_from_dict(data, 'f.yaml')
+
+
+def test_airspace_keys_are_known():
+    data = load_scenario(DATA / 'uniform20_0.yaml').to_dict()
+    data.update(no_fly_zones=[], terrain=None, lethal_radius=1.0)
+    data['threats'][0]['lethal_radius'] = 2.0
+    assert len(scenario_from_dict(data).threats) == 20
+
+
+def test_bad_values_print_as_plain_numbers():
+    data = load_scenario(DATA / 'uniform20_0.yaml').to_dict()
+    data['threats'][0]['intensity'] = -5.0
+    with pytest.raises(ScenarioError) as info:
+        scenario_from_dict(data, 'f.yaml')
+    assert '-5.0' in str(info.value) and 'np.' not in str(info.value)

@@ -15,6 +15,7 @@ Layout (as in the bundled ``test/data/*.yaml``)::
 from __future__ import annotations
 
 from dataclasses import dataclass
+import difflib
 from pathlib import Path
 
 import numpy as np
@@ -58,6 +59,23 @@ class Scenario:
         }
 
 
+#: Keys a scenario file may hold; the airspace keys are read by the airspace layer.
+TOP_KEYS = ('name', 'frame_id', 'description', 'bounds', 'start', 'goal', 'threats',
+            'no_fly_zones', 'terrain', 'lethal_radius')
+BOUNDS_KEYS = ('min', 'max')
+THREAT_KEYS = ('position', 'intensity', 'lethal_radius')
+
+
+def _check_keys(mapping: dict, known: tuple, where: str, fail) -> None:
+    """Refuse an unknown (often misspelt) key, naming it and the nearest known one."""
+    for key in mapping:
+        if key in known:
+            continue
+        close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+        hint = f'; did you mean "{close[0]}"?' if close else ''
+        raise fail(f'unknown field "{where}{key}"{hint} (known: {", ".join(known)})')
+
+
 def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
     """Build and validate a Scenario from parsed YAML.
 
@@ -76,12 +94,14 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
 
     if not isinstance(data, dict):
         raise fail('expected a mapping at the top level')
+    _check_keys(data, TOP_KEYS, '', fail)
     for key in ('bounds', 'start', 'goal', 'threats'):
         if key not in data:
             raise fail(f'missing field "{key}"')
     bounds = data['bounds']
     if not isinstance(bounds, dict) or 'min' not in bounds or 'max' not in bounds:
         raise fail('field "bounds" needs "min" and "max"')
+    _check_keys(bounds, BOUNDS_KEYS, 'bounds.', fail)
     threats = data['threats'] if data['threats'] is not None else []
     if not isinstance(threats, list):
         raise fail('field "threats" must be a list')
@@ -89,6 +109,7 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
     for i, t in enumerate(threats):
         if not isinstance(t, dict) or 'position' not in t or 'intensity' not in t:
             raise fail(f'threats[{i}] needs "position" and "intensity"')
+        _check_keys(t, THREAT_KEYS, f'threats[{i}].', fail)
         positions.append(t['position'])
         intensities.append(t['intensity'])
     try:

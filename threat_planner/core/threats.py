@@ -130,7 +130,7 @@ class ThreatField:
         bad = np.flatnonzero(f <= 0)
         if len(bad):
             raise InputError(f'threats[{int(bad[0])}].intensity: must be > 0, got '
-                             f'{f[bad[0]]!r} ({len(bad)} such threats)')
+                             f'{float(f[bad[0]])!r} ({len(bad)} such threats)')
         pos.setflags(write=False)
         f.setflags(write=False)
         return cls(pos, f)

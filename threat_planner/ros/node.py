@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import collections
 import threading
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
@@ -60,13 +60,14 @@ from threat_planner.bag import McapRecorder
 from threat_planner.errors import InputError, RecordingError
 from threat_planner.ros.conversions import plan_info_msg
 from threat_planner.ros.inputs import accept, InputState
-from threat_planner.ros.interface import (LATCHED, NODE_NAME, PARAMETER_EVENT_TYPE,
-                                          PARAMETER_EVENTS_QOS, PARAMETER_EVENTS_TOPIC,
-                                          POSE_INPUT, THREAT_INPUT)
+from threat_planner.ros.interface import (INPUT_TOPICS, LATCHED, NODE_NAME, OUTPUT_TOPICS,
+                                          PARAMETER_EVENT_TYPE, PARAMETER_EVENTS_QOS,
+                                          PARAMETER_EVENTS_TOPIC, POSE_INPUT, THREAT_INPUT)
 from threat_planner.ros.outputs import (input_values, outcome_messages, PlanOutcome,
                                         PlanRequest, run_plan)
 from threat_planner.ros.parameters import (descriptor, PARAMETER_DEFAULTS,
                                            PLANNING_PARAMETERS)
+from threat_planner.ros.plan_service import PlanService
 from threat_planner.ros.process import run_node
 from threat_planner.ros.worker import PlanWorker
 
@@ -94,8 +95,23 @@ class ThreatPlannerNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
+        self._declare_parameters()
+        self._configure()
+        self._create_outputs(self.create_publisher)
+        self._create_inputs()
+        self._plan_service: Optional[PlanService] = PlanService(self, lambda: self._state)
+        self._log_ready()
+
+    # -- set-up steps, shared with the managed node (issue 13: ros/lifecycle.py) ------
+
+    def _declare_parameters(self) -> None:
         for name, default in PARAMETER_DEFAULTS.items():
             self.declare_parameter(name, default, descriptor(name))
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+
+    def _configure(self) -> None:
+        """Validate the parameters into the state, start the worker, open the recording."""
         self._state = InputState.from_parameters(self._parameter_values())
         self._seq = 0
         self._received = 0
@@ -107,13 +123,21 @@ class ThreatPlannerNode(Node):
         self._outcomes: collections.deque[tuple[str, PlanOutcome]] = collections.deque()
         self._outcome_lock = threading.Lock()
         self._closed = False
+        self._subs: dict = {}
+        self._guard = self.create_guard_condition(self._publish_outcomes)
+        self._worker = PlanWorker(self._plan_job, name='threat_planner_worker')
+        if self._state.settings.record:
+            self._recorder = self._open_recorder(self._state.settings.record)
 
+    def _create_outputs(self, create: Callable) -> None:
         self._pubs = {
-            'initial_path': self.create_publisher(Path, 'initial_path', LATCHED),
-            'path': self.create_publisher(Path, 'path', LATCHED),
-            'network': self.create_publisher(MarkerArray, 'network', LATCHED),
-            'plan_info': self.create_publisher(DiagnosticArray, 'plan_info', LATCHED),
+            'initial_path': create(Path, 'initial_path', LATCHED),
+            'path': create(Path, 'path', LATCHED),
+            'network': create(MarkerArray, 'network', LATCHED),
+            'plan_info': create(DiagnosticArray, 'plan_info', LATCHED),
         }
+
+    def _create_inputs(self) -> None:
         self._subs = {
             'threats': self.create_subscription(
                 PointCloud2, 'threats', lambda m: self._receive('threats', m), THREAT_INPUT),
@@ -126,20 +150,15 @@ class ThreatPlannerNode(Node):
                 PoseStamped, 'goal_pose', lambda m: self._receive('goal_pose', m),
                 POSE_INPUT),
         }
-        self._guard = self.create_guard_condition(self._publish_outcomes)
-        self._worker = PlanWorker(self._plan_job, name='threat_planner_worker')
 
+    def _log_ready(self) -> None:
         settings = self._state.settings
-        if settings.record:
-            self._recorder = self._open_recorder(settings.record)
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self.add_post_set_parameters_callback(self._apply_parameters)
         cfg = settings.config
         self.get_logger().info(
             f'ready: method={cfg.method} w={cfg.w} frame_id={settings.frame_id} '
             f'bounds={settings.box.lo.tolist()}..{settings.box.hi.tolist()}; '
-            f'waiting for a threat picture on {self._subs["threats"].topic_name} or '
-            f'{self._subs["threat_poses"].topic_name}')
+            f'waiting for a threat picture on {self.resolve_topic_name("threats")} or '
+            f'{self.resolve_topic_name("threat_poses")}')
 
     # -- parameters ------------------------------------------------------------------
 
@@ -148,6 +167,9 @@ class ThreatPlannerNode(Node):
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         """Refuse a change whose value, or whose combination with the state, is bad."""
+        if self._state is None:
+            # A managed node before configure: the values are checked on configure.
+            return SetParametersResult(successful=True)
         names = {p.name for p in params}
         try:
             state = accept(self._state, 'parameters',
@@ -188,9 +210,10 @@ class ThreatPlannerNode(Node):
     def _open_recorder(self, target: str) -> McapRecorder:
         recorder = McapRecorder(target, prefix=NODE_NAME)
         try:
-            for endpoint in list(self._subs.values()) + list(self._pubs.values()):
-                recorder.add_topic(endpoint.topic_name, _type_name(endpoint.msg_type),
-                                   endpoint.qos_profile)
+            # From the interface, not the endpoints: a managed node records from configure
+            # on, before its subscriptions exist.
+            for name, (type_name, qos) in {**INPUT_TOPICS, **OUTPUT_TOPICS}.items():
+                recorder.add_topic(self.resolve_topic_name(name), type_name, qos)
             recorder.add_topic(PARAMETER_EVENTS_TOPIC, PARAMETER_EVENT_TYPE,
                                PARAMETER_EVENTS_QOS)
             # The full parameter set first, so the recording alone says how the node was set.
@@ -335,11 +358,10 @@ class ThreatPlannerNode(Node):
                                       'its result is dropped')
         with self._outcome_lock:
             self._closed = True
+        if self._plan_service is not None:
+            self._plan_service.close()
+            self._plan_service = None
         self._close_recorder()
-
-
-def _type_name(msg_type: type) -> str:
-    return f'{msg_type.__module__.split(".")[0]}/msg/{msg_type.__name__}'
 
 
 def main(args: Optional[list[str]] = None) -> int:

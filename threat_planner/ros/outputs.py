@@ -288,5 +288,7 @@ def _result_values(result: PlanResult, n_threats: int) -> dict[str, object]:
         'path_points': len(result.path),
         'initial_path_points': len(result.initial_path),
     }
+    # Warm replanning is the core's (branch 'limits'); until PlanResult says, a plan is cold.
+    values['start'] = 'warm' if getattr(result, 'warm', False) else 'cold'
     values.update(result.timings_ms)
     return values

@@ -152,6 +152,9 @@ class ThreatPublisher(Node):
                         "then the planner's default_intensity)"))
         self.declare_parameter('frame_id', '', ParameterDescriptor(
             description="Frame of the messages; '' = the scenario's frame_id"))
+        self.declare_parameter('namespaces', [''], ParameterDescriptor(
+            description="Publish to each of these namespaces (['/uav1', '/uav2']); "
+                        "[''] = this node's own namespace"))
 
         path = self.get_parameter('scenario').value
         if not path:
@@ -170,23 +173,30 @@ class ThreatPublisher(Node):
             self.get_logger().warning('drift is ignored with rate 0 (published once)')
         self._tick = 0
 
-        if self._use_poses:
-            self._pub_threats = self.create_publisher(PoseArray, 'threat_poses', LATCHED)
-        else:
-            self._pub_threats = self.create_publisher(PointCloud2, 'threats', LATCHED)
-        self._pub_start = self.create_publisher(PoseStamped, 'start', LATCHED)
-        self._pub_goal = self.create_publisher(PoseStamped, 'goal_pose', LATCHED)
-        self._matched = {'start': 0, 'goal': 0}
+        # One publisher set per namespace: a fleet of planners fed from one scenario.
+        prefixes = [ns.rstrip('/') + '/' if ns else ''
+                    for ns in self.get_parameter('namespaces').value]
+        self._pubs_threats = [
+            self.create_publisher(PoseArray, f'{p}threat_poses', LATCHED) if self._use_poses
+            else self.create_publisher(PointCloud2, f'{p}threats', LATCHED) for p in prefixes]
+        self._pub_threats = self._pubs_threats[0]
+        self._pose_pubs = []
+        for p in prefixes:
+            self._pose_pubs.append(('start', self.create_publisher(
+                PoseStamped, f'{p}start', LATCHED), self._scenario.start))
+            self._pose_pubs.append(('goal', self.create_publisher(
+                PoseStamped, f'{p}goal_pose', LATCHED), self._scenario.goal))
+        self._matched = {id(pub): 0 for _, pub, _ in self._pose_pubs}
 
-        self._publish_pose(self._pub_start, self._scenario.start)
-        self._publish_pose(self._pub_goal, self._scenario.goal)
+        for _, pub, xyz in self._pose_pubs:
+            self._publish_pose(pub, xyz)
         self._publish_threats()
         self.create_timer(_MATCH_POLL_S, self._republish_to_new_subscribers)
         if self._rate > 0.0:
             self.create_timer(1.0 / self._rate, self._publish_threats)
         self.get_logger().info(
             f'{self._scenario.name}: {len(self._scenario.threats)} threats on '
-            f'{self._pub_threats.topic_name} in frame {self._frame}, '
+            f'{", ".join(p.topic_name for p in self._pubs_threats)} in frame {self._frame}, '
             + (f'{self._rate:g} Hz, drift {drift:g} m/s' if self._rate > 0.0
                else 'published once (latched)'))
 
@@ -218,15 +228,15 @@ class ThreatPublisher(Node):
         else:
             msg = pointcloud2_from_threats(positions, self._scenario.threats.intensities,
                                            self._frame, stamp)
-        self._pub_threats.publish(msg)
+        for pub in self._pubs_threats:
+            pub.publish(msg)
 
     def _republish_to_new_subscribers(self) -> None:
-        for key, pub, xyz in (('start', self._pub_start, self._scenario.start),
-                              ('goal', self._pub_goal, self._scenario.goal)):
+        for _, pub, xyz in self._pose_pubs:
             count = pub.get_subscription_count()
-            if count > self._matched[key]:
+            if count > self._matched[id(pub)]:
                 self._publish_pose(pub, xyz)
-            self._matched[key] = count
+            self._matched[id(pub)] = count
 
 
 def main(args: Optional[list[str]] = None) -> int:

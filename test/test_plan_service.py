@@ -1,0 +1,110 @@
+"""The ``plan_path`` service (nav_msgs/srv/GetPlan) of a planner node in another process."""
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from nav_msgs.srv import GetPlan
+import numpy as np
+import pytest
+from sensor_msgs.msg import PointCloud2
+
+from node_harness import (cloud, domain_id, info, planner_command, pose, REPO, RosClient,
+                          start_process, stop_process)
+from threat_planner.core.planner import plan
+from threat_planner.core.scenario import load_scenario
+from threat_planner.ros.conversions import path_from_msg
+from threat_planner.ros.parameters import PARAMETER_DEFAULTS, settings_from_parameters
+
+DOMAIN = domain_id(50)
+SCENARIO = load_scenario(REPO / 'test' / 'data' / 'uniform20_0.yaml')
+NS = '/svc'
+PARAMS = {'method': 'paper'}
+
+
+@pytest.fixture(scope='module')
+def node(tmp_path_factory):
+    log = tmp_path_factory.mktemp('svc') / 'node.log'
+    client = RosClient(DOMAIN, 'test_service_client')
+    proc = start_process(planner_command(NS, PARAMS, params_file=None), DOMAIN, log)
+    client.subscribe(f'{NS}/plan_info', DiagnosticArray)
+    pub = client.publisher(f'{NS}/threats', PointCloud2)
+    pub.publish(cloud(SCENARIO.threats.positions, SCENARIO.threats.intensities))
+    client.wait_for(f'{NS}/plan_info', timeout=30.0)
+    cli = client.node.create_client(GetPlan, f'{NS}/plan_path')
+    assert cli.wait_for_service(timeout_sec=20.0)
+    yield client, cli, proc, log
+    rc = stop_process(proc)
+    client.close()
+    assert rc == 0, log.read_text()
+
+
+def ask(client, cli, start, goal, frame='map', timeout=30.0):
+    future = cli.call_async(GetPlan.Request(start=pose(start, frame), goal=pose(goal, frame)))
+    client.wait_until(future.done, timeout, 'plan_path answer')
+    return future.result().plan
+
+
+def test_good_request_is_the_library_plan_and_leaves_the_topics_alone(node):
+    client, cli, _, _ = node
+    before = client.count(f'{NS}/plan_info')
+    start, goal = [5.0, 10.0, 40.0], [95.0, 90.0, 60.0]
+    got = path_from_msg(ask(client, cli, start, goal))
+    settings = settings_from_parameters({**PARAMETER_DEFAULTS, **PARAMS})
+    expected = plan(SCENARIO.threats, np.array(start), np.array(goal), settings.box,
+                    settings.config)
+    np.testing.assert_allclose(got, expected.path, rtol=0, atol=1e-6)
+    time.sleep(0.5)
+    assert client.count(f'{NS}/plan_info') == before, 'a request publishes nothing'
+
+
+@pytest.mark.parametrize('start, frame, reason', [
+    ([-20.0, 0.0, 50.0], 'map', 'start: [-20.0, 0.0, 50.0] is outside bounds'),
+    ([5.0, 5.0, 50.0], 'odom', "frame_id 'odom'"),
+])
+def test_bad_request_gets_an_empty_path_and_a_logged_reason(node, start, frame, reason):
+    client, cli, _, log = node
+    answer = ask(client, cli, start, [95.0, 95.0, 50.0], frame)
+    assert answer.poses == [] and answer.header.frame_id == 'map'
+    client.wait_until(lambda: reason in log.read_text(), 5.0, 'the logged reason')
+
+
+def test_concurrent_requests_are_all_answered_in_order(node):
+    client, cli, _, _ = node
+    done = []
+    futures = []
+    for i in range(5):
+        req = GetPlan.Request(start=pose([0, 0, 50]), goal=pose([100, 100, 10.0 + 15 * i]))
+        f = cli.call_async(req)
+        f.add_done_callback(lambda _, i=i: done.append(i))
+        futures.append(f)
+    client.wait_until(lambda: all(f.done() for f in futures), 60.0, 'five answers')
+    assert done == [0, 1, 2, 3, 4]
+    for i, f in enumerate(futures):
+        end = path_from_msg(f.result().plan)[-1]
+        np.testing.assert_allclose(end, [100, 100, 10.0 + 15 * i], atol=1e-4)
+
+
+def test_request_is_answered_while_a_long_topic_plan_runs(node):
+    client, cli, _, _ = node
+    node_name = f'{NS}/threat_planner'
+    topic = f'{NS}/plan_info'
+    count = client.count(topic)
+    # 'improved' sweeps k over 26 values: seconds of topic planning; the request after the
+    # switch back to 'paper' is planned with 'paper' while that sweep still runs.
+    assert client.set_parameters(node_name, {'method': 'improved'})[0].successful
+    assert client.set_parameters(node_name, {'method': 'paper'})[0].successful
+    t0 = time.monotonic()
+    answer = ask(client, cli, [0, 0, 50], [100, 100, 50])
+    answered = time.monotonic() - t0
+    assert len(answer.poses) > 2
+    infos = [info(m) for _, m in client.messages[topic][count:]]
+    assert not any(i['method'] == 'improved' for i in infos), (answered, infos)
+    slow = client.wait_for(topic, lambda m: info(m)['method'] == 'improved', after=count,
+                           timeout=120.0)
+    assert info(slow)['level'] != 'ERROR'
+
+
+def test_plan_info_says_cold_or_warm_with_the_timings(node):
+    client, _, _, _ = node
+    last = info(client.last(f'{NS}/plan_info'))
+    assert last['start'] in ('warm', 'cold') and float(last['total_ms']) > 0
