@@ -131,7 +131,11 @@ class ThreatPlannerNode(Node):
 
         settings = self._state.settings
         if settings.record:
-            self._recorder = self._open_recorder(settings.record)
+            try:
+                self._recorder = self._open_recorder(settings.record)
+            except RecordingError:
+                self._worker.stop()  # reliability (issue 14): no thread left behind
+                raise
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         cfg = settings.config
@@ -204,6 +208,19 @@ class ThreatPlannerNode(Node):
         self.get_logger().info(f'recording inputs and outputs to {recorder.path}')
         return recorder
 
+    def _recording_failed(self, exc: RecordingError) -> None:
+        recorder, self._recorder = self._recorder, None
+        message = (f'recording stopped after {recorder.message_count} messages, planning '
+                   f'continues: {exc}')
+        self.get_logger().error(message)
+        try:
+            recorder.close()
+        except RecordingError:
+            pass  # the recorder failed already; close() only releases the file
+        values = self._input_values(self._seq, 'recording', Time())
+        values['recording_error'] = str(exc)
+        self._publish('plan_info', plan_info_msg('WARN', message, values, Time()))
+
     def _close_recorder(self) -> None:
         recorder, self._recorder = self._recorder, None
         if recorder is None:
@@ -232,9 +249,8 @@ class ThreatPlannerNode(Node):
         try:
             self._recorder.write(topic, msg, log_time_ns=self._now_ns())
         except RecordingError as exc:
-            # Disk full or similar: stop recording rather than fail every callback.
-            self.get_logger().error(f'recording stopped: {exc}')
-            self._close_recorder()
+            # reliability (issue 14): disk full or similar: stop recording, keep planning.
+            self._recording_failed(exc)
 
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
