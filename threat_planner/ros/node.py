@@ -175,7 +175,9 @@ class ThreatPlannerNode(Node):
         state, recorder = self._staged
         self._staged = None
         names = {p.name for p in params}
-        self._state = state
+        previous, self._state = self._state, state
+        if previous.threats is not None and state.threats is None:
+            self._frame_changed(previous.settings.frame_id, state.settings.frame_id)
         if 'record' in names and (recorder is not None or not state.settings.record):
             self._close_recorder()
             self._recorder = recorder
@@ -186,6 +188,16 @@ class ThreatPlannerNode(Node):
         self.get_logger().info(f'input #{self._seq} (parameters): {changed}')
         if names & PLANNING_PARAMETERS:
             self._request_plan('parameters', self.get_clock().now().to_msg())
+
+    def _frame_changed(self, old: str, new: str) -> None:
+        # reliability (issue 14): say that the picture of the old frame is gone.
+        message = (f'frame_id changed from {old!r} to {new!r}: the threat picture received '
+                   f'in {old!r} was dropped; no plan until a picture in {new!r} arrives')
+        self.get_logger().warning(message)
+        stamp = self.get_clock().now().to_msg()
+        values = self._input_values(self._seq + 1, 'parameters', stamp)
+        values['threats_dropped'] = 'true'
+        self._publish('plan_info', plan_info_msg('WARN', message, values, stamp))
 
     # -- recording -------------------------------------------------------------------
 

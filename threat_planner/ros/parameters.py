@@ -13,7 +13,8 @@ from typing import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType)
 
 from threat_planner.core.config import PlannerConfig
 from threat_planner.core.settings import NODE_SETTINGS
@@ -139,11 +140,18 @@ def descriptor(name: str) -> ParameterDescriptor:
                                                         to_value=float(s.hi), step=0.0)]
     elif s.lo is not None and s.hi is not None and s.kind is int:
         desc.integer_range = [IntegerRange(from_value=int(s.lo), to_value=int(s.hi), step=1)]
-    if s.kind is list:
-        # `-p bounds:=[0,0,0,100,100,100]` arrives as an integer array; accept it and
-        # check the numbers ourselves rather than refuse it for its element type.
-        desc.dynamic_typing = True
+    # One type per parameter, from the setting's kind: a value of another type (bounds as
+    # strings, an integer array for a double array) is refused by rclpy with the reason,
+    # at start-up as well as at run time.
+    desc.type = _PARAMETER_TYPES[s.kind]
+    desc.dynamic_typing = False
     return desc
+
+
+_PARAMETER_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
+                    float: ParameterType.PARAMETER_DOUBLE,
+                    str: ParameterType.PARAMETER_STRING,
+                    list: ParameterType.PARAMETER_DOUBLE_ARRAY}
 
 
 def as_declared(name: str, value: object) -> object:
