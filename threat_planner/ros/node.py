@@ -64,11 +64,11 @@ from threat_planner.ros.interface import (LATCHED, NODE_NAME, PARAMETER_EVENT_TY
                                           PARAMETER_EVENTS_QOS, PARAMETER_EVENTS_TOPIC,
                                           POSE_INPUT, THREAT_INPUT)
 from threat_planner.ros.outputs import (input_values, outcome_messages, PlanOutcome,
-                                        PlanRequest, run_plan)
+                                        PlanRequest)
 from threat_planner.ros.parameters import (descriptor, PARAMETER_DEFAULTS,
                                            PLANNING_PARAMETERS)
 from threat_planner.ros.process import run_node
-from threat_planner.ros.worker import PlanWorker
+from threat_planner.ros.worker import ProcessPlanWorker
 
 __all__ = ['ThreatPlannerNode', 'main']
 
@@ -127,7 +127,8 @@ class ThreatPlannerNode(Node):
                 POSE_INPUT),
         }
         self._guard = self.create_guard_condition(self._publish_outcomes)
-        self._worker = PlanWorker(self._plan_job, name='threat_planner_worker')
+        # reliability (issue 14): plans run in a child process, the executor stays free.
+        self._worker = ProcessPlanWorker(self._hand_over, name='threat_planner_worker')
 
         settings = self._state.settings
         if settings.record:
@@ -305,9 +306,6 @@ class ThreatPlannerNode(Node):
 
     # -- planning (worker thread) ----------------------------------------------------
 
-    def _plan_job(self, request: PlanRequest) -> None:
-        run_plan(request, self._hand_over, self._now_ns)
-
     def _hand_over(self, phase: str, outcome: PlanOutcome) -> None:
         """Queue a phase of a plan for the executor thread and wake it."""
         with self._outcome_lock:
@@ -335,6 +333,11 @@ class ThreatPlannerNode(Node):
                     return
                 phase, outcome = self._outcomes.popleft()
             req = outcome.request
+            if phase == 'cancelled':
+                self._skipped += 1
+                self.get_logger().info(f'plan for input #{req.seq} cancelled after '
+                                       f'{outcome.plan_ms / 1e3:.1f} s: a newer input waits')
+                continue
             if phase == 'done':
                 self._plans += 1
                 if outcome.network is None:

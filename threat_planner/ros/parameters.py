@@ -36,7 +36,8 @@ PARAMETER_DEFAULTS: dict[str, object] = {
 CONFIG_FIELDS = tuple(name for name, s in NODE_SETTINGS.items() if s.scope == 'planner')
 #: Parameters whose change can alter the plan; the rest (recording, input limits) cannot.
 PLANNING_PARAMETERS = frozenset(PARAMETER_DEFAULTS) - {'record', 'max_threats',
-                                                       'default_intensity'}
+                                                       'default_intensity',
+                                                       'max_plan_time_s'}
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,8 @@ class NodeSettings:
         Intensity of PoseArray threats.
     max_threats : int
         Largest accepted threat picture.
+    max_plan_time_s : float
+        Longest time of one plan [s].
     record : str
         Recording target, '' for none.
 
@@ -71,6 +74,7 @@ class NodeSettings:
     goal: NDArray
     default_intensity: float
     max_threats: int
+    max_plan_time_s: float
     record: str
 
 
@@ -123,11 +127,12 @@ def settings_from_parameters(values: Mapping[str, object]) -> NodeSettings:
             'bounds.max', 'bounds')) from None
     start = as_point('start', _numbers('start', values['start'], 3, '[x, y, z]'))
     goal = as_point('goal', _numbers('goal', values['goal'], 3, '[x, y, z]'))
-    for name in ('frame_id', 'default_intensity', 'max_threats', 'record'):
+    for name in ('frame_id', 'default_intensity', 'max_threats', 'max_plan_time_s', 'record'):
         NODE_SETTINGS[name].check(values[name])
     return NodeSettings(config=config, box=box, frame_id=values['frame_id'], start=start,
                         goal=goal, default_intensity=float(values['default_intensity']),
                         max_threats=int(values['max_threats']),
+                        max_plan_time_s=float(values['max_plan_time_s']),
                         record=values['record'].strip())
 
 
