@@ -52,7 +52,8 @@ def test_a_plan_in_the_child_equals_the_library_plan():
         assert [p for p, _ in phases.got] == ['paths', 'done']
         expected = plan(req.threats, req.start, req.goal, req.settings.box, req.settings.config)
         assert done.result.cost == expected.cost
-        assert (done.result.path == expected.path).all() and len(done.path.poses) == len(expected.path)
+        assert (done.result.path == expected.path).all()
+        assert len(done.path.poses) == len(expected.path)
     finally:
         assert worker.stop()
 
