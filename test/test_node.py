@@ -696,4 +696,5 @@ def test_bad_start_up_parameters_exit_with_reason(tmp_path):
     proc = start_process(planner_command('/bad', {'record': '/proc/forbidden/x.mcap'}),
                          DOMAIN, log)
     assert proc.wait(30) == 1
-    assert 'cannot start: /proc/forbidden/x.mcap: cannot create recording' in log.read_text()
+    assert ('cannot start recording: /proc/forbidden/x.mcap: cannot create recording'
+            in log.read_text())

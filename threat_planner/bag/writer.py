@@ -17,6 +17,7 @@ Typical use::
         ...
 """
 
+import contextlib
 import dataclasses
 import datetime
 import importlib
@@ -123,10 +124,9 @@ class McapRecorder:
             raise RecordingError(f'{path}: cannot create recording: {exc.strerror or exc}') \
                 from exc
         self._lock = threading.RLock()
-        self._writer = Writer(self._stream, chunk_size=int(chunk_size),
-                              compression=CompressionType.ZSTD)
-        self._writer.start(profile=PROFILE, library=_library_string())
-        self._stream.flush()
+        # Set by the first I/O error: from then on nothing more is written, and close()
+        # only releases the file instead of raising the same error again.
+        self._failed: Optional[str] = None
         self._schemas: Dict[str, int] = {}
         self._topics: Dict[str, _Topic] = {}
         self._count = 0
@@ -134,6 +134,17 @@ class McapRecorder:
         self._end_ns: Optional[int] = None
         self._pending = 0
         self._closed = False
+        self._writer = Writer(self._stream, chunk_size=int(chunk_size),
+                              compression=CompressionType.ZSTD)
+        try:
+            self._writer.start(profile=PROFILE, library=_library_string())
+            self._stream.flush()
+            if self._bag_dir is not None:
+                self._write_metadata()
+        except (OSError, RecordingError) as exc:
+            self._release()
+            raise RecordingError(f'{path}: cannot create recording: {_reason(exc)}') \
+                from exc
         self._interval = float(flush_interval_s) if flush_interval_s else 0.0
         self._last_flush = time.monotonic()
         self._stop = threading.Event()
@@ -144,8 +155,6 @@ class McapRecorder:
             self._flusher = threading.Thread(target=self._flush_loop, daemon=True,
                                              name=f'mcap-flush-{self._path.name}')
             self._flusher.start()
-        if self._bag_dir is not None:
-            self._write_metadata()
 
     @staticmethod
     def _make_bag_dir(folder: Path, prefix: str) -> Path:
@@ -264,9 +273,9 @@ class McapRecorder:
                 self._writer.add_message(channel_id=entry.channel_id, log_time=log_time_ns,
                                          data=data, publish_time=publish_time_ns,
                                          sequence=entry.count + 1)
-            except OSError as exc:
+            except (OSError, ValueError) as exc:
                 # A full chunk is written inside add_message, so the disk shows up here.
-                raise RecordingError(f'{self._path}: cannot write: {exc}') from exc
+                raise self._fail('cannot write', exc) from exc
             entry.count += 1
             self._count += 1
             self._pending += 1
@@ -300,15 +309,20 @@ class McapRecorder:
         if self._flusher is not None and self._flusher is not threading.current_thread():
             self._flusher.join()
         with self._lock:
+            if self._failed is not None:
+                # Already reported; the chunks written before the failure stay readable
+                # with the tolerant reader (or `threat-planner bag repair`).
+                self._release()
+                return
             try:
                 self._writer.finish()
                 self._stream.flush()
-            except (OSError, ValueError) as exc:
-                raise RecordingError(f'{self._path}: cannot finish recording: {exc}') from exc
-            finally:
                 self._stream.close()
                 if self._bag_dir is not None:
                     self._write_metadata()
+            except (OSError, ValueError, RecordingError) as exc:
+                self._release()
+                raise self._fail('cannot finish recording', exc) from exc
 
     def __enter__(self) -> 'McapRecorder':
         """Return the recorder itself."""
@@ -320,9 +334,31 @@ class McapRecorder:
 
     # -- internals --------------------------------------------------------------------
 
+    @property
+    def failed(self) -> Optional[str]:
+        """The first I/O error (the recording stopped there), or None."""
+        return self._failed
+
     def _check_open(self) -> None:
+        if self._failed is not None:
+            raise RecordingError(f'{self._path}: recording stopped after: {self._failed}')
         if self._closed:
             raise RecordingError(f'{self._path}: recorder is closed')
+
+    def _fail(self, what: str, exc: BaseException) -> RecordingError:
+        """Remember the first I/O error and return the error to raise for it."""
+        if self._failed is None:
+            self._failed = f'{what}: {_reason(exc)}'
+        return RecordingError(f'{self._path}: {what}: {_reason(exc)}')
+
+    def _release(self) -> None:
+        """Close the file without writing more; buffered bytes that cannot go are lost."""
+        try:
+            self._stream.close()
+        except (OSError, ValueError):
+            # BufferedWriter.close retries the failed flush, then closes the descriptor
+            # regardless: the error was reported once already.
+            pass
 
     @staticmethod
     def _serialize(topic: str, msg) -> bytes:
@@ -348,15 +384,18 @@ class McapRecorder:
             return entry
         qos = as_topic_qos(qos)
         schema_id = self._schemas.get(type_name)
-        if schema_id is None:
-            text = message_definition(type_name)
-            schema_id = self._writer.register_schema(
-                name=type_name, encoding=SCHEMA_ENCODING, data=text.encode('utf-8'))
-            self._schemas[type_name] = schema_id
-        channel_id = self._writer.register_channel(
-            topic=topic, message_encoding=MESSAGE_ENCODING, schema_id=schema_id,
-            metadata={'offered_qos_profiles': qos.to_yaml(),
-                      'topic_type_hash': type_description_hash(type_name)})
+        try:
+            if schema_id is None:
+                text = message_definition(type_name)
+                schema_id = self._writer.register_schema(
+                    name=type_name, encoding=SCHEMA_ENCODING, data=text.encode('utf-8'))
+                self._schemas[type_name] = schema_id
+            channel_id = self._writer.register_channel(
+                topic=topic, message_encoding=MESSAGE_ENCODING, schema_id=schema_id,
+                metadata={'offered_qos_profiles': qos.to_yaml(),
+                          'topic_type_hash': type_description_hash(type_name)})
+        except (OSError, ValueError) as exc:
+            raise self._fail('cannot write', exc) from exc
         entry = _Topic(type_name=type_name, qos=qos, channel_id=channel_id)
         self._topics[topic] = entry
         return entry
@@ -375,23 +414,25 @@ class McapRecorder:
                 if time.monotonic() - self._last_flush >= self._interval:
                     try:
                         self._flush_locked()
-                    except RecordingError:
-                        # Disk full or similar: close() reports it; a dying timer thread
-                        # must not take the process down with it.
-                        _LOG.exception('periodic flush of %s failed', self._path)
+                    except RecordingError as exc:
+                        # Disk full or similar: the next write() raises it to the owner,
+                        # who reports it once; this thread only stops.
+                        _LOG.debug('periodic flush stopped: %s', exc)
                         return
 
     def _flush_locked(self) -> None:
+        if self._failed is not None:
+            raise RecordingError(f'{self._path}: recording stopped after: {self._failed}')
         try:
             if self._pending:
                 end_chunk(self._writer)
             self._stream.flush()
-        except OSError as exc:
-            raise RecordingError(f'{self._path}: cannot write: {exc}') from exc
+            if self._pending and self._bag_dir is not None:
+                # Keeps a killed bag playable with counts up to the last flush.
+                self._write_metadata()
+        except (OSError, ValueError, RecordingError) as exc:
+            raise self._fail('cannot write', exc) from exc
         self._last_flush = time.monotonic()
-        if self._pending and self._bag_dir is not None:
-            # Keeps a killed bag playable with counts up to the last flush.
-            self._write_metadata()
         self._pending = 0
 
     def _write_metadata(self) -> None:
@@ -438,4 +479,14 @@ class McapRecorder:
             tmp.write_text(text, encoding='utf-8')
             os.replace(tmp, target)
         except OSError as exc:
-            raise RecordingError(f'{target}: cannot write bag metadata: {exc}') from exc
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+            raise RecordingError(f'{target}: cannot write bag metadata: {_reason(exc)}') \
+                from exc
+
+
+def _reason(exc: BaseException) -> str:
+    """Return the one-line reason of an I/O error, without the file name repeated."""
+    if isinstance(exc, OSError) and exc.strerror:
+        return exc.strerror
+    return str(exc)

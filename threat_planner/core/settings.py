@@ -242,6 +242,9 @@ SETTINGS: tuple[Setting, ...] = (
             lo_open=True, scope='node'),
     Setting('max_threats', int, 10000, 'Largest threat picture accepted', lo=0,
             hi=1_000_000, scope='node'),
+    Setting('max_plan_time_s', float, 60.0,
+            'Longest time one plan may take; a longer one is stopped and reported as timed '
+            'out in plan_info', unit='s', lo=0.0, hi=86400.0, lo_open=True, scope='node'),
     Setting('record', str, '',
             "MCAP recording of inputs and outputs: a path ending in .mcap (one file) or a "
             "folder (one bag per run); '' = off", scope='node'),

@@ -18,6 +18,34 @@ from scipy.spatial import cKDTree
 from threat_planner.errors import InputError
 
 
+#: Largest coordinate magnitude accepted anywhere [m]. Beyond it double-precision geometry
+#: stops being geometry: at 1e12 m neighbouring doubles are 0.1 mm apart and d^4 of the
+#: threat cost stays below 1e49, while at 1e154 m d^4 overflows and Qhull's and the
+#: search's arithmetic lose every metre. 1e12 m (7 au) is far beyond any flight.
+COORDINATE_LIMIT_M = 1.0e12
+
+
+def check_coordinates(name: str, arr: NDArray) -> None:
+    """Raise InputError unless every coordinate of `arr` is within the limit.
+
+    Parameters
+    ----------
+    name : str
+        Field name for the message.
+    arr : NDArray
+        Finite coordinates (3,) or (N, 3) [m].
+
+    """
+    big = np.abs(arr) > COORDINATE_LIMIT_M
+    if big.any():
+        rows = big.reshape(-1, 3).any(axis=1) if arr.ndim > 1 else big[:1]
+        first = int(np.argmax(rows))
+        where = f'{name}[{first}]' if arr.ndim > 1 else name
+        value = float(np.abs(arr.reshape(-1, 3)[first]).max())
+        raise InputError(f'{where}: coordinate {value:g} m is too large for double-precision '
+                         f'geometry; |x|, |y|, |z| must be <= {COORDINATE_LIMIT_M:g} m')
+
+
 def _finite_array(name: str, value: ArrayLike, shape_tail: tuple[int, ...]) -> NDArray:
     """Convert to a float array of shape (..., *shape_tail) with only finite values."""
     try:
@@ -56,6 +84,7 @@ def as_point(name: str, value: ArrayLike) -> NDArray:
         raise InputError(f'{name}: expected 3 coordinates, got {arr.size}')
     if not np.all(np.isfinite(arr)):
         raise InputError(f'{name}: not finite: {arr.tolist()}')
+    check_coordinates(name, arr)
     return arr
 
 
@@ -124,6 +153,7 @@ class ThreatField:
             InputError: naming the bad field, index and value.
         """
         pos = _finite_array('threats.position', positions, (3,))
+        check_coordinates('threats', pos)
         f = _finite_array('threats.intensity', intensities, ())
         if len(f) != len(pos):
             raise InputError(f'threats: {len(pos)} positions but {len(f)} intensities')

@@ -111,8 +111,16 @@ def _accept(state: InputState, kind: str, msg) -> InputState:
         settings = settings_from_parameters(values)
         start = settings.start if 'start' in msg else state.start
         goal = settings.goal if 'goal' in msg else state.goal
-        check_endpoints(start, goal, settings.box, state.known_threats)
-        return replace(state, values=values, settings=settings, start=start, goal=goal)
+        threats = state.threats
+        if settings.frame_id != s.frame_id:
+            # The picture was received in the old frame; relabelling it would put every
+            # threat in the wrong place. It is dropped (the node says so) until a picture
+            # in the new frame arrives.
+            threats = None
+        check_endpoints(start, goal, settings.box,
+                        NO_THREATS if threats is None else threats)
+        return replace(state, values=values, settings=settings, threats=threats,
+                       start=start, goal=goal)
     if kind == 'start':
         start = point_from_pose_stamped(msg, s.frame_id, 'start')
         check_endpoints(start, state.goal, s.box, state.known_threats)

@@ -64,12 +64,12 @@ from threat_planner.ros.interface import (INPUT_TOPICS, LATCHED, NODE_NAME, OUTP
                                           PARAMETER_EVENT_TYPE, PARAMETER_EVENTS_QOS,
                                           PARAMETER_EVENTS_TOPIC, POSE_INPUT, THREAT_INPUT)
 from threat_planner.ros.outputs import (input_values, outcome_messages, PlanOutcome,
-                                        PlanRequest, run_plan)
+                                        PlanRequest)
 from threat_planner.ros.parameters import (descriptor, PARAMETER_DEFAULTS,
                                            PLANNING_PARAMETERS)
 from threat_planner.ros.plan_service import PlanService
 from threat_planner.ros.process import run_node
-from threat_planner.ros.worker import PlanWorker
+from threat_planner.ros.worker import ProcessPlanWorker
 
 __all__ = ['ThreatPlannerNode', 'main']
 
@@ -125,9 +125,14 @@ class ThreatPlannerNode(Node):
         self._closed = False
         self._subs: dict = {}
         self._guard = self.create_guard_condition(self._publish_outcomes)
-        self._worker = PlanWorker(self._plan_job, name='threat_planner_worker')
+        # reliability (issue 14): plans run in a child process, the executor stays free.
+        self._worker = ProcessPlanWorker(self._hand_over, name='threat_planner_worker')
         if self._state.settings.record:
-            self._recorder = self._open_recorder(self._state.settings.record)
+            try:
+                self._recorder = self._open_recorder(self._state.settings.record)
+            except RecordingError:
+                self._worker.stop()  # reliability (issue 14): no process left behind
+                raise
 
     def _create_outputs(self, create: Callable) -> None:
         self._pubs = {
@@ -193,7 +198,9 @@ class ThreatPlannerNode(Node):
         state, recorder = self._staged
         self._staged = None
         names = {p.name for p in params}
-        self._state = state
+        previous, self._state = self._state, state
+        if previous.threats is not None and state.threats is None:
+            self._frame_changed(previous.settings.frame_id, state.settings.frame_id)
         if 'record' in names and (recorder is not None or not state.settings.record):
             self._close_recorder()
             self._recorder = recorder
@@ -204,6 +211,16 @@ class ThreatPlannerNode(Node):
         self.get_logger().info(f'input #{self._seq} (parameters): {changed}')
         if names & PLANNING_PARAMETERS:
             self._request_plan('parameters', self.get_clock().now().to_msg())
+
+    def _frame_changed(self, old: str, new: str) -> None:
+        # reliability (issue 14): say that the picture of the old frame is gone.
+        message = (f'frame_id changed from {old!r} to {new!r}: the threat picture received '
+                   f'in {old!r} was dropped; no plan until a picture in {new!r} arrives')
+        self.get_logger().warning(message)
+        stamp = self.get_clock().now().to_msg()
+        values = self._input_values(self._seq + 1, 'parameters', stamp)
+        values['threats_dropped'] = 'true'
+        self._publish('plan_info', plan_info_msg('WARN', message, values, stamp))
 
     # -- recording -------------------------------------------------------------------
 
@@ -226,6 +243,19 @@ class ThreatPlannerNode(Node):
             raise
         self.get_logger().info(f'recording inputs and outputs to {recorder.path}')
         return recorder
+
+    def _recording_failed(self, exc: RecordingError) -> None:
+        recorder, self._recorder = self._recorder, None
+        message = (f'recording stopped after {recorder.message_count} messages, planning '
+                   f'continues: {exc}')
+        self.get_logger().error(message)
+        try:
+            recorder.close()
+        except RecordingError:
+            pass  # the recorder failed already; close() only releases the file
+        values = self._input_values(self._seq, 'recording', Time())
+        values['recording_error'] = str(exc)
+        self._publish('plan_info', plan_info_msg('WARN', message, values, Time()))
 
     def _close_recorder(self) -> None:
         recorder, self._recorder = self._recorder, None
@@ -255,9 +285,8 @@ class ThreatPlannerNode(Node):
         try:
             self._recorder.write(topic, msg, log_time_ns=self._now_ns())
         except RecordingError as exc:
-            # Disk full or similar: stop recording rather than fail every callback.
-            self.get_logger().error(f'recording stopped: {exc}')
-            self._close_recorder()
+            # reliability (issue 14): disk full or similar: stop recording, keep planning.
+            self._recording_failed(exc)
 
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
@@ -300,9 +329,6 @@ class ThreatPlannerNode(Node):
 
     # -- planning (worker thread) ----------------------------------------------------
 
-    def _plan_job(self, request: PlanRequest) -> None:
-        run_plan(request, self._hand_over, self._now_ns)
-
     def _hand_over(self, phase: str, outcome: PlanOutcome) -> None:
         """Queue a phase of a plan for the executor thread and wake it."""
         with self._outcome_lock:
@@ -330,6 +356,11 @@ class ThreatPlannerNode(Node):
                     return
                 phase, outcome = self._outcomes.popleft()
             req = outcome.request
+            if phase == 'cancelled':
+                self._skipped += 1
+                self.get_logger().info(f'plan for input #{req.seq} cancelled after '
+                                       f'{outcome.plan_ms / 1e3:.1f} s: a newer input waits')
+                continue
             if phase == 'done':
                 self._plans += 1
                 if outcome.network is None:

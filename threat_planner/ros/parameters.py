@@ -13,7 +13,8 @@ from typing import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                ParameterType)
 
 from threat_planner.core.config import PlannerConfig
 from threat_planner.core.settings import NODE_SETTINGS
@@ -35,7 +36,8 @@ PARAMETER_DEFAULTS: dict[str, object] = {
 CONFIG_FIELDS = tuple(name for name, s in NODE_SETTINGS.items() if s.scope == 'planner')
 #: Parameters whose change can alter the plan; the rest (recording, input limits) cannot.
 PLANNING_PARAMETERS = frozenset(PARAMETER_DEFAULTS) - {'record', 'max_threats',
-                                                       'default_intensity'}
+                                                       'default_intensity',
+                                                       'max_plan_time_s'}
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,8 @@ class NodeSettings:
         Intensity of PoseArray threats.
     max_threats : int
         Largest accepted threat picture.
+    max_plan_time_s : float
+        Longest time of one plan [s].
     record : str
         Recording target, '' for none.
 
@@ -70,6 +74,7 @@ class NodeSettings:
     goal: NDArray
     default_intensity: float
     max_threats: int
+    max_plan_time_s: float
     record: str
 
 
@@ -122,11 +127,12 @@ def settings_from_parameters(values: Mapping[str, object]) -> NodeSettings:
             'bounds.max', 'bounds')) from None
     start = as_point('start', _numbers('start', values['start'], 3, '[x, y, z]'))
     goal = as_point('goal', _numbers('goal', values['goal'], 3, '[x, y, z]'))
-    for name in ('frame_id', 'default_intensity', 'max_threats', 'record'):
+    for name in ('frame_id', 'default_intensity', 'max_threats', 'max_plan_time_s', 'record'):
         NODE_SETTINGS[name].check(values[name])
     return NodeSettings(config=config, box=box, frame_id=values['frame_id'], start=start,
                         goal=goal, default_intensity=float(values['default_intensity']),
                         max_threats=int(values['max_threats']),
+                        max_plan_time_s=float(values['max_plan_time_s']),
                         record=values['record'].strip())
 
 
@@ -139,11 +145,18 @@ def descriptor(name: str) -> ParameterDescriptor:
                                                         to_value=float(s.hi), step=0.0)]
     elif s.lo is not None and s.hi is not None and s.kind is int:
         desc.integer_range = [IntegerRange(from_value=int(s.lo), to_value=int(s.hi), step=1)]
-    if s.kind is list:
-        # `-p bounds:=[0,0,0,100,100,100]` arrives as an integer array; accept it and
-        # check the numbers ourselves rather than refuse it for its element type.
-        desc.dynamic_typing = True
+    # One type per parameter, from the setting's kind: a value of another type (bounds as
+    # strings, an integer array for a double array) is refused by rclpy with the reason,
+    # at start-up as well as at run time.
+    desc.type = _PARAMETER_TYPES[s.kind]
+    desc.dynamic_typing = False
     return desc
+
+
+_PARAMETER_TYPES = {bool: ParameterType.PARAMETER_BOOL, int: ParameterType.PARAMETER_INTEGER,
+                    float: ParameterType.PARAMETER_DOUBLE,
+                    str: ParameterType.PARAMETER_STRING,
+                    list: ParameterType.PARAMETER_DOUBLE_ARRAY}
 
 
 def as_declared(name: str, value: object) -> object:

@@ -14,7 +14,7 @@ from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from threat_planner.errors import ThreatPlannerError
+from threat_planner.errors import RecordingError, ThreatPlannerError
 
 __all__ = ['ros_initialised', 'run_node']
 
@@ -82,6 +82,10 @@ def run_node(factory: Callable[[], Node], name: str,
             try:
                 try:
                     node = factory()
+                except RecordingError as exc:
+                    # Asked to record and cannot: refuse to run rather than fly unrecorded.
+                    get_logger(name).fatal(f'cannot start recording: {exc}')
+                    return 1
                 except (ThreatPlannerError, ParameterException) as exc:
                     get_logger(name).fatal(f'cannot start: {exc}')
                     return 1

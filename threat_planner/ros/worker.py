@@ -1,11 +1,11 @@
-"""PlanWorker: one plan at a time in a daemon thread, the newest request waiting."""
+"""Plan workers: one plan at a time, the newest request waiting; optionally in a process."""
 
 from __future__ import annotations
 
 import threading
 from typing import Callable, Optional
 
-__all__ = ['PlanWorker', 'WORKER_JOIN_S']
+__all__ = ['PlanWorker', 'ProcessPlanWorker', 'WORKER_JOIN_S']
 
 # A plan that cannot finish within this after shutdown is abandoned (the worker is a
 # daemon thread): a 1000-threat 'best' plan takes tens of seconds and must not hold up
@@ -99,3 +99,144 @@ class PlanWorker:
             finally:
                 with self._cond:
                     self._busy = False
+
+
+# -- planning in a child process -------------------------------------------------------
+
+#: A running plan older than this is cancelled when a newer request waits [s]; a shorter
+#: one finishes (so a flood of inputs still gets plans out, each for the newest state).
+CANCEL_STALE_AFTER_S = 1.0
+#: How often the waiting thread looks at stop, timeout and newer requests [s].
+POLL_S = 0.02
+
+
+def _child_main(conn) -> None:
+    """Plan requests from `conn` until it closes; send each phase back as it is ready."""
+    import signal
+    import time
+
+    from threat_planner.ros.outputs import run_plan
+
+    # Ctrl-C reaches the whole process group; the parent decides when this child ends.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    def hand_over(phase, outcome) -> None:
+        outcome.exception = None  # the text is in outcome.error; exceptions may not pickle
+        conn.send((phase, outcome))
+
+    while True:
+        try:
+            request = conn.recv()
+        except (EOFError, OSError):
+            return
+        run_plan(request, hand_over, time.time_ns)
+        conn.send(('end', None))
+
+
+class _PlanProcess:
+    """One spawned planning process and its pipe; killed to cancel what it plans."""
+
+    def __init__(self) -> None:
+        import multiprocessing
+        # spawn, not fork: the parent runs DDS threads whose locks a fork would copy.
+        ctx = multiprocessing.get_context('spawn')
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_child_main, args=(child,), daemon=True,
+                                name='threat_planner_plan')
+        self.proc.start()
+        child.close()
+
+    def kill(self) -> None:
+        self.proc.kill()
+        self.proc.join(1.0)
+        self.conn.close()
+
+
+class ProcessPlanWorker:
+    """Plans in a child process, so a long plan never holds this process's interpreter.
+
+    The executor keeps answering services and parameters while a plan runs; a plan is
+    stopped by killing its process: on shutdown (at once), when it exceeds the request's
+    ``settings.max_plan_time_s`` (reported as an ``'error'`` phase), and when a newer
+    request waits and the plan has run :data:`CANCEL_STALE_AFTER_S` (a ``'cancelled'``
+    phase). A warm spare process takes over after a kill, so the next plan does not wait
+    for the imports of a new one.
+
+    Parameters
+    ----------
+    hand_over : Callable[[str, PlanOutcome], None]
+        Called in the worker thread with each phase (``'paths'``, ``'done'``, ``'error'``,
+        ``'cancelled'``), as :func:`threat_planner.ros.outputs.run_plan` hands them over.
+    name : str
+        Thread name.
+
+    """
+
+    def __init__(self, hand_over: Callable[[str, object], None],
+                 name: str = 'planner') -> None:
+        self._hand_over = hand_over
+        self._stopped = threading.Event()
+        self._child = _PlanProcess()
+        self._spare: Optional[_PlanProcess] = _PlanProcess()
+        self._worker = PlanWorker(self._run, name=name)
+
+    def submit(self, job: object) -> bool:
+        """Make `job` the next request (see :meth:`PlanWorker.submit`)."""
+        return self._worker.submit(job)
+
+    @property
+    def busy(self) -> bool:
+        """Whether a plan is running."""
+        return self._worker.busy
+
+    def stop(self, timeout: float = WORKER_JOIN_S) -> bool:
+        """Kill the planning processes and end the thread; True if it ended in `timeout`."""
+        self._stopped.set()
+        ended = self._worker.stop(timeout)
+        for child in (self._child, self._spare):
+            if child is not None:
+                child.kill()
+        return ended
+
+    def _replace_child(self) -> None:
+        self._child.kill()
+        self._child = self._spare if self._spare is not None else _PlanProcess()
+        self._spare = None if self._stopped.is_set() else _PlanProcess()
+
+    def _run(self, request) -> None:
+        import time
+
+        from threat_planner.ros.outputs import PlanOutcome
+
+        t0 = time.monotonic()
+        limit = request.settings.max_plan_time_s
+        try:
+            self._child.conn.send(request)
+            while True:
+                if self._stopped.is_set():
+                    return
+                if self._child.conn.poll(POLL_S):
+                    phase, outcome = self._child.conn.recv()
+                    if phase == 'end':
+                        return
+                    self._hand_over(phase, outcome)
+                    continue
+                running = time.monotonic() - t0
+                if running > limit:
+                    self._replace_child()
+                    self._hand_over('error', PlanOutcome(
+                        request, plan_ms=1e3 * running,
+                        error=f'timed out after {running:.1f} s (max_plan_time_s={limit:g}); '
+                              'the previous plan stays latched'))
+                    return
+                if self._worker.has_pending and running >= CANCEL_STALE_AFTER_S:
+                    self._replace_child()
+                    self._hand_over('cancelled', PlanOutcome(request, plan_ms=1e3 * running))
+                    return
+        except (EOFError, OSError, BrokenPipeError) as exc:
+            if self._stopped.is_set():
+                return
+            code = self._child.proc.exitcode
+            self._replace_child()
+            self._hand_over('error', PlanOutcome(
+                request, error=f'planner process ended (exit code {code}): {exc}'))

@@ -1,0 +1,86 @@
+"""ProcessPlanWorker: plans in a child process, which is killed on timeout, cancel and stop."""
+
+import threading
+import time
+
+from builtin_interfaces.msg import Time
+
+from threat_planner.core.scenario import load_scenario
+from threat_planner.core.planner import plan
+from threat_planner.ros.outputs import PlanRequest
+from threat_planner.ros.parameters import PARAMETER_DEFAULTS, settings_from_parameters
+from threat_planner.ros.worker import CANCEL_STALE_AFTER_S, ProcessPlanWorker
+
+from node_harness import REPO
+
+SCENARIO = load_scenario(REPO / 'test' / 'data' / 'uniform20_0.yaml')
+
+
+def request(seq, **params):
+    box = SCENARIO.box
+    values = {**PARAMETER_DEFAULTS, 'bounds': box.lo.tolist() + box.hi.tolist(),
+              'start': SCENARIO.start.tolist(), 'goal': SCENARIO.goal.tolist(), **params}
+    s = settings_from_parameters(values)
+    return PlanRequest(seq=seq, source='test', stamp=Time(sec=seq), received_ns=time.time_ns(),
+                       threats=SCENARIO.threats, start=s.start, goal=s.goal, settings=s)
+
+
+class Phases:
+    def __init__(self):
+        self.cond = threading.Condition()
+        self.got = []
+
+    def __call__(self, phase, outcome):
+        with self.cond:
+            self.got.append((phase, outcome))
+            self.cond.notify_all()
+
+    def wait(self, pred, timeout=60.0):
+        with self.cond:
+            assert self.cond.wait_for(lambda: any(pred(p, o) for p, o in self.got), timeout), \
+                [(p, o.request.seq) for p, o in self.got]
+            return next(o for p, o in self.got if pred(p, o))
+
+
+def test_a_plan_in_the_child_equals_the_library_plan():
+    phases = Phases()
+    worker = ProcessPlanWorker(phases)
+    try:
+        req = request(1, method='paper')
+        worker.submit(req)
+        done = phases.wait(lambda p, o: p == 'done')
+        assert [p for p, _ in phases.got] == ['paths', 'done']
+        expected = plan(req.threats, req.start, req.goal, req.settings.box, req.settings.config)
+        assert done.result.cost == expected.cost
+        assert (done.result.path == expected.path).all()
+        assert len(done.path.poses) == len(expected.path)
+    finally:
+        assert worker.stop()
+
+
+def test_timeout_cancel_and_stop_kill_the_plan():
+    phases = Phases()
+    worker = ProcessPlanWorker(phases)
+    try:
+        # A 'best' plan of 5000 points takes far longer than 0.5 s.
+        worker.submit(request(1, n_points=5000, max_plan_time_s=0.5))
+        t0 = time.monotonic()
+        timed_out = phases.wait(lambda p, o: p == 'error')
+        assert 'timed out after' in timed_out.error and 'max_plan_time_s=0.5' in timed_out.error
+        assert time.monotonic() - t0 < 3.0
+        # A newer request cancels a long stale plan, and is planned itself.
+        worker.submit(request(2, n_points=5000))
+        time.sleep(0.2)
+        worker.submit(request(3, method='paper'))
+        cancelled = phases.wait(lambda p, o: p == 'cancelled')
+        assert cancelled.request.seq == 2 and cancelled.plan_ms >= 1e3 * CANCEL_STALE_AFTER_S
+        phases.wait(lambda p, o: p == 'done' and o.request.seq == 3)
+        # Stop during a long plan returns at once.
+        worker.submit(request(4, n_points=5000))
+        time.sleep(0.5)
+        assert worker.busy
+        t0 = time.monotonic()
+        assert worker.stop()
+        assert time.monotonic() - t0 < 1.0
+    finally:
+        worker.stop()
