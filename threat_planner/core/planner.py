@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
+from threat_planner.core.airspace import Airspace
 from threat_planner.core.config import PlannerConfig
 from threat_planner.core.methods import Clock, K_SWEEP, METHOD_FUNCTIONS, Problem
 from threat_planner.core.partition import build_network
@@ -47,7 +48,8 @@ def check_endpoints(start: ArrayLike, goal: ArrayLike, box: Box,
 
 def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
          config: PlannerConfig = PlannerConfig(),
-         progress: Callable[[int, int], None] | None = None) -> PlanResult:
+         progress: Callable[[int, int], None] | None = None,
+         airspace: Airspace | None = None) -> PlanResult:
     """Plan a path from start to goal through the threat field.
 
     Args:
@@ -57,6 +59,7 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         box: Flight box.
         config: Planner settings.
         progress: Optional callback (done, total) for long sweeps.
+        airspace: No-fly zones and terrain to respect (method 'best' only), or None.
 
     Returns:
         The PlanResult.
@@ -67,25 +70,40 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
     """
     config.validated()
     s, t = check_endpoints(start, goal, box, threats)
+    if airspace:   # airspace hook (issue 12)
+        if config.method != 'best':
+            raise InputError(f'method: no-fly zones and terrain need method best, '
+                             f'got {config.method}')
+        airspace.check_point('start', s)
+        airspace.check_point('goal', t)
+    else:
+        airspace = None
     # The optimisers make thousands of tiny BLAS calls; a threaded BLAS spends longer waking
     # its threads than computing, and far longer when the cores are busy (measured: 4x).
     with threadpool_limits(1, user_api='blas'):
-        return _plan(threats, s, t, box, config, progress)
+        return _plan(threats, s, t, box, config, progress, airspace)
 
 
 def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: PlannerConfig,
-          progress: Callable[[int, int], None] | None) -> PlanResult:
+          progress: Callable[[int, int], None] | None,
+          airspace: Airspace | None = None) -> PlanResult:
     clock = Clock()
     network = build_network(threats.positions, box, config.box_divisions)
     clock.lap('partition_ms')
     edge_j = None
-    if config.method != 'paper':
+    if config.method != 'paper' and airspace is None:
         edge_j = edge_threat_costs(network, threats, threats.typical_spacing(box),
                                    volume=float(np.prod(box.hi - box.lo)))
     clock.lap('edge_costs_ms')
     problem = Problem(threats=threats, s=s, t=t, box=box, config=config, network=network,
-                      edge_j=edge_j, clock=clock, progress=progress)
-    best = METHOD_FUNCTIONS[config.method](problem)
+                      edge_j=edge_j, clock=clock, progress=progress, airspace=airspace)
+    if airspace is not None:   # airspace hook (issue 12)
+        from threat_planner.core.airspace_planning import plan_in_airspace
+        best = plan_in_airspace(problem)
+        network = problem.network
+        edge_j = None
+    else:
+        best = METHOD_FUNCTIONS[config.method](problem)
     if not np.isfinite(best.cost.J):
         raise PlanningError(
             f'cost: no path with a finite J was found (J = {best.cost.J}); the intensities '
@@ -101,4 +119,5 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
         smoothed_cost=best.smoothed_cost, cost=best.cost, k=best.k, angles=best.angles,
         smoothing_steps=best.steps, smoothing_converged=best.converged,
         candidates=problem.candidates, k_sweep=problem.k_sweep, seed=best.seed,
-        edge_cutoff=None if edge_j is None else edge_j.radius, timings_ms=timings)
+        edge_cutoff=None if edge_j is None else edge_j.radius, timings_ms=timings,
+        clearance=None if airspace is None else airspace.clearance(best.final))

@@ -41,6 +41,8 @@ class PlanResult:
         seed: Which start the final path grew from ('route i' or 'straight line').
         edge_cutoff: Cut-off radius of the edge costs [m], None if exact.
         timings_ms: Wall time per stage [ms].
+        clearance: Smallest margins of the final path to the zones and the terrain
+            floor (an ``airspace.Clearance``), or None without an airspace.
     """
 
     method: str
@@ -64,6 +66,8 @@ class PlanResult:
     seed: str = 'route 0'
     edge_cutoff: float | None = None
     timings_ms: dict[str, float] = field(default_factory=dict)
+    # airspace hook (issue 12): margins of the final path, None without an airspace.
+    clearance: 'Clearance | None' = None  # noqa: F821
 
     @property
     def feasible(self) -> bool:
@@ -96,4 +100,5 @@ class PlanResult:
                           'converged': self.smoothing_converged},
             'edge_cutoff_m': self.edge_cutoff,
             'timings_ms': self.timings_ms,
+            **({} if self.clearance is None else {'clearance': self.clearance.as_dict()}),
         }
