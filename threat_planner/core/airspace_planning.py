@@ -72,8 +72,13 @@ def lattice(box, divisions: int = LATTICE_DIVISIONS) -> tuple[NDArray, NDArray]:
     return pts, np.concatenate(edges)
 
 
-def routing_network(network: Network, box, airspace: Airspace) -> Network:
-    """The network joined to a lattice, with every edge that breaks the airspace removed."""
+def routing_network(network: Network, box, airspace: Airspace, confine: bool = True
+                    ) -> Network:
+    """The network joined to a lattice, with every edge that breaks the airspace removed.
+
+    With ``confine``, edges to network nodes in the box's margin go too (the lattice
+    covers the box), so that no route leaves the box.
+    """
     pts, ledges = lattice(box)
     m = network.n_nodes
     _, near = cKDTree(pts).query(network.nodes, k=LATTICE_LINKS)
@@ -81,7 +86,11 @@ def routing_network(network: Network, box, airspace: Airspace) -> Network:
     nodes = np.vstack([network.nodes, pts])
     edges = np.concatenate([network.edges, ledges + m, links])
     edges = np.sort(edges, axis=1)
-    ok = airspace.segment_ok(nodes[edges[:, 0]], nodes[edges[:, 1]])
+    ok = np.ones(len(edges), bool)
+    if confine:
+        inside = np.all((nodes >= box.lo - 1e-9) & (nodes <= box.hi + 1e-9), axis=1)
+        ok = inside[edges[:, 0]] & inside[edges[:, 1]]
+    ok[ok] = airspace.segment_ok(nodes[edges[ok, 0]], nodes[edges[ok, 1]])
     return replace(network, nodes=nodes, edges=edges[ok])
 
 
@@ -267,7 +276,7 @@ def plan_in_airspace(p) -> 'Candidate':  # noqa: F821 (methods.Candidate, no imp
     from threat_planner.core.methods import Candidate
     cfg, threats, air = p.config, p.threats, p.airspace
     box = p.box if cfg.confine_to_box else None
-    net = routing_network(p.network, p.box, air)
+    net = routing_network(p.network, p.box, air, cfg.confine_to_box)
     p.network = net
     p.clock.lap('partition_ms')
     ej = edge_costs(net, threats, air)
