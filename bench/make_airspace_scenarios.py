@@ -18,8 +18,10 @@ def ridges(n: int = 41, size: float = 1000.0) -> np.ndarray:
     """Two ridges across the route with a saddle in each, rows along y [m]."""
     x = np.linspace(0, size, n)
     xx, yy = np.meshgrid(x, x)
-    r1 = 160 * np.exp(-((xx + 0.3 * yy - 450) / 60) ** 2) * (1 - 0.6 * np.exp(-((yy - 300) / 90) ** 2))
-    r2 = 190 * np.exp(-((xx - 0.2 * yy - 620) / 70) ** 2) * (1 - 0.6 * np.exp(-((yy - 750) / 90) ** 2))
+    gap1 = 1 - 0.6 * np.exp(-((yy - 300) / 90) ** 2)
+    gap2 = 1 - 0.6 * np.exp(-((yy - 750) / 90) ** 2)
+    r1 = 160 * np.exp(-((xx + 0.3 * yy - 450) / 60) ** 2) * gap1
+    r2 = 190 * np.exp(-((xx - 0.2 * yy - 620) / 70) ** 2) * gap2
     return np.round(20 + r1 + r2 + 10 * np.sin(xx / 130) * np.cos(yy / 170), 2)
 
 

@@ -259,19 +259,28 @@ def test_airspace_needs_method_best():
              PlannerConfig(method='paper'), airspace=Airspace((zone,)))
 
 
+def _cylinder(c, r, z):
+    return 'cylinder', dict(center=c, radius=r, z_min=z[0], z_max=z[0] + z[1])
+
+
+def _box(lo, size):
+    return 'box', dict(min=lo, max=[v + s for v, s in zip(lo, size)])
+
+
+def _arrow_prism(c, r, z):
+    # a concave quadrilateral (an arrow head): the prism's non-convex case
+    poly = [[c[0] - r, c[1] - r], [c[0] + r, c[1]], [c[0], c[1] + r], [c[0], c[1]]]
+    return 'prism', dict(polygon=poly, z_min=z, z_max=z + 60)
+
+
 _zone_strategy = st.one_of(
     st.builds(lambda c, r: ('sphere', dict(center=c, radius=r)),
               st.tuples(*[st.floats(25, 75)] * 3), st.floats(3, 15)),
-    st.builds(lambda c, r, z: ('cylinder', dict(center=c, radius=r, z_min=z[0],
-                                                 z_max=z[0] + z[1])),
-              st.tuples(*[st.floats(25, 75)] * 2), st.floats(3, 15),
+    st.builds(_cylinder, st.tuples(*[st.floats(25, 75)] * 2), st.floats(3, 15),
               st.tuples(st.floats(0, 40), st.floats(10, 100))),
-    st.builds(lambda lo, size: ('box', dict(min=lo, max=[v + s for v, s in zip(lo, size)])),
-              st.tuples(*[st.floats(20, 70)] * 3), st.tuples(*[st.floats(3, 25)] * 3)),
-    st.builds(lambda c, r, z: ('prism', dict(polygon=[[c[0] - r, c[1] - r], [c[0] + r, c[1]],
-                                                       [c[0], c[1] + r], [c[0], c[1]]],
-                                              z_min=z, z_max=z + 60)),
-              st.tuples(*[st.floats(30, 70)] * 2), st.floats(4, 15), st.floats(0, 40)))
+    st.builds(_box, st.tuples(*[st.floats(20, 70)] * 3), st.tuples(*[st.floats(3, 25)] * 3)),
+    st.builds(_arrow_prism, st.tuples(*[st.floats(30, 70)] * 2), st.floats(4, 15),
+              st.floats(0, 40)))
 
 
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -119,7 +119,7 @@ def zone_from_mapping(data: object, name: str) -> Zone:
 
 
 def terrain_from_mapping(data: object, base: Optional[Path] = None) -> Terrain:
-    """The ``terrain`` mapping of the YAML model; ``file`` is relative to ``base``."""
+    """Build the ``terrain`` mapping of the YAML model; ``file`` is relative to ``base``."""
     if not isinstance(data, dict):
         raise InputError('terrain: expected a mapping')
     unknown = sorted(set(map(str, data)) - _TERRAIN_KEYS)
@@ -212,7 +212,7 @@ class Airspace:
         return out
 
     def to_mapping(self) -> dict:
-        """The ``no_fly_zones`` and ``terrain`` keys (lethal radii stay with threats)."""
+        """Return the ``no_fly_zones`` and ``terrain`` keys (lethal radii stay with threats)."""
         out: dict = {}
         zones = [z for z in self.zones if not z.label.startswith('threats[')]
         if zones:
@@ -225,7 +225,7 @@ class Airspace:
         return out
 
     def __bool__(self) -> bool:
-        """True when there is anything to respect."""
+        """Return whether there is anything to respect."""
         return bool(self.zones) or self.terrain is not None
 
     @property
@@ -262,12 +262,12 @@ class Airspace:
 
     def segment_ok(self, a: NDArray, b: NDArray, tol: float = 1e-9) -> NDArray:
         """Whether each segment stays outside every zone and above the floor (S,)."""
+        a, b = np.atleast_2d(a), np.atleast_2d(b)
         ok = self.terrain_margins(a, b) >= -tol
-        if self.zones:
-            ok &= np.all(self.zone_margins(a, b) >= -tol, axis=0)
-            for z in self.zones:
-                if isinstance(z, Prism):
-                    ok &= ~z.crosses(np.atleast_2d(a), np.atleast_2d(b))
+        for z in self.zones:
+            # A prism's exact crossing test decides alone (open interior) and is cheaper.
+            ok &= (~z.crosses(a, b) if isinstance(z, Prism)
+                   else z.segment_distance(a, b)[0] >= -tol)
         return ok
 
     def clearance(self, points: NDArray) -> Clearance:

@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 
 from threat_planner.core.airspace import Airspace
 from threat_planner.core.cost import (Cost, cost_and_gradient, segment_integrals,
-                                     segment_threat_costs)
+                                      segment_threat_costs)
 from threat_planner.core.masking import (masked_cost_and_gradient, masked_path_j_r,
                                          masked_segment_costs, visible_pieces)
 from threat_planner.core.optimisation import angle_constraints
@@ -74,7 +74,7 @@ def lattice(box, divisions: int = LATTICE_DIVISIONS) -> tuple[NDArray, NDArray]:
 
 def routing_network(network: Network, box, airspace: Airspace, confine: bool = True
                     ) -> Network:
-    """The network joined to a lattice, with every edge that breaks the airspace removed.
+    """Join the network to a lattice and remove every edge that breaks the airspace.
 
     With ``confine``, edges to network nodes in the box's margin go too (the lattice
     covers the box), so that no route leaves the box.
@@ -272,7 +272,7 @@ def minimise_in_airspace(points: NDArray, threats, w: float, box, airspace: Airs
 
 
 def plan_in_airspace(p) -> 'Candidate':  # noqa: F821 (methods.Candidate, no import cycle)
-    """Method 'best' inside the airspace of Problem ``p`` (see the module docstring)."""
+    """Solve Problem ``p`` with method 'best' inside its airspace (see the module docstring)."""
     from threat_planner.core.methods import Candidate
     cfg, threats, air = p.config, p.threats, p.airspace
     box = p.box if cfg.confine_to_box else None

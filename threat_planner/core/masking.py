@@ -129,7 +129,7 @@ def masked_path_j_r(points: NDArray, positions: NDArray, intensities: NDArray,
 
 def visible_pieces(points: NDArray, positions: NDArray, terrain: Terrain, samples: int = 9
                    ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """The seen pieces of a polyline's segments for every radar.
+    """Find the seen pieces of a polyline's segments for every radar.
 
     Returns:
         ``(segment, radar, f0, f1)``: each seen piece runs from fraction f0 to f1 of its

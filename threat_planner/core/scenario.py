@@ -108,8 +108,8 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
             if not isinstance(p, (list, tuple)) or len(p) != 3:
                 raise InputError(f'threats[{i}].position: expected [x, y, z], got {p!r}')
         box = Box.from_corners(bounds['min'], bounds['max'])
-        threat_field = ThreatField.from_arrays(np.array(positions, dtype=float).reshape(-1, 3),
-                                        np.array(intensities, dtype=float))
+        threat_field = ThreatField.from_arrays(
+            np.array(positions, dtype=float).reshape(-1, 3), np.array(intensities, dtype=float))
         start, goal = check_endpoints(data['start'], data['goal'], box, threat_field)
         base = None if source.startswith('<') else Path(source).parent
         airspace = Airspace.from_mapping(
