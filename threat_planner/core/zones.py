@@ -65,7 +65,7 @@ class Zone:
         return 1.0
 
     def inside(self, p: NDArray) -> NDArray:
-        """Return whether each point (last axis xyz) is strictly inside (open interior)."""
+        """Return whether each point (last axis xyz) lies in the open interior."""
         return self.sdf(np.asarray(p, float)) < 0.0
 
     def segment_distance(self, a: NDArray, b: NDArray) -> tuple[NDArray, NDArray]:
