@@ -43,10 +43,12 @@ def _zone_lines(zone) -> list[NDArray]:
 
 def draw_airspace(ax, airspace, box, threats, path: NDArray | None) -> None:
     """Draw zones, terrain and the final path (masked parts grey) on a 3-D axis."""
-    for i, zone in enumerate(airspace.zones):
+    label = 'no-fly zones'
+    for zone in airspace.zones:
         for line in _zone_lines(zone):
             ax.plot(*np.clip(line, box.lo, box.hi).T, color='tab:orange', linewidth=0.9,
-                    label='no-fly zones' if i == 0 and line is not None else None)
+                    label=label)
+            label = None
     ter = airspace.terrain
     if ter is not None:
         x = np.linspace(box.lo[0], box.hi[0], 40)
