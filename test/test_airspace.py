@@ -319,3 +319,9 @@ def test_each_airspace_scenario_plans_with_positive_clearance(path, tmp_path):
     exact = (masked_cost(pts, sc.threats, 0.5, sc.airspace) if sc.airspace.masking else
              path_cost(pts, sc.threats.positions, sc.threats.intensities, 0.5))
     assert r['cost']['final']['J'] == pytest.approx(exact.J, rel=1e-12)
+
+
+def test_plot_draws_zones_terrain_and_masked_parts(tmp_path):
+    out = tmp_path / 'plan.png'
+    assert main(['plan', str(DATA / 'air_mixed_0.yaml'), '--plot', str(out)]) == 0
+    assert out.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
