@@ -18,7 +18,7 @@ from threat_planner.core.threats import Box, ThreatField  # noqa: E402
 def plot_plan(path_png: str | Path, threats: ThreatField, box: Box, start: NDArray,
               goal: NDArray, network_nodes: NDArray | None = None,
               network_edges: NDArray | None = None, initial_path: NDArray | None = None,
-              path: NDArray | None = None, title: str = '') -> Path:
+              path: NDArray | None = None, title: str = '', airspace=None) -> Path:
     """Draw threats as spheres sized by intensity, the network, and the two paths.
 
     Args:
@@ -32,6 +32,8 @@ def plot_plan(path_png: str | Path, threats: ThreatField, box: Box, start: NDArr
         initial_path: Dijkstra path (m, 3) [m], or None.
         path: Final path (n, 3) [m], or None.
         title: Figure title.
+        airspace: An ``airspace.Airspace`` to draw (zones, terrain, the path's masked
+            parts in grey), or None.
 
     Returns:
         The written file's path.
@@ -52,7 +54,10 @@ def plot_plan(path_png: str | Path, threats: ThreatField, box: Box, start: NDArr
         ax.scatter(*network_nodes.T, s=4, color='tab:red', alpha=0.5)
     if initial_path is not None:
         ax.plot(*initial_path.T, color='tab:blue', linewidth=1.2, label='initial (Dijkstra)')
-    if path is not None:
+    if airspace is not None:
+        from threat_planner.cli.airspace_figures import draw_airspace
+        draw_airspace(ax, airspace, box, threats, path)
+    elif path is not None:
         ax.plot(*path.T, color='k', linewidth=2.2, label='final path')
     ax.scatter(*start, marker='^', s=60, color='green', label='S')
     ax.scatter(*goal, marker='*', s=90, color='purple', label='T')

@@ -13,7 +13,7 @@ from pathlib import Path
 import sys
 
 from threat_planner.cli.bag import add_bag_commands
-from threat_planner.errors import ThreatPlannerError
+from threat_planner.errors import InputError, ThreatPlannerError
 from threat_planner.cli.options import add_planner_options, config_from, overrides, ProgressBar
 from threat_planner.core.planner import plan
 from threat_planner.core.scenario import load_scenario
@@ -30,12 +30,15 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     cfg = config_from(args)
     progress = ProgressBar('sweep')
+    if args.record and scenario.airspace:
+        raise InputError(f'--record: {scenario.name} has no-fly zones or terrain, which '
+                         'recordings do not hold yet')
     if args.record:
         from threat_planner.bag.record import record_plan
         result, recording = record_plan(scenario, cfg, args.record, progress=progress)
     else:
         result = plan(scenario.threats, scenario.start, scenario.goal, scenario.box, cfg,
-                      progress=progress)
+                      progress=progress, airspace=scenario.airspace or None)
     progress.close()
     c0, c = result.initial_cost, result.cost
     stages = ', '.join(f'{k[:-3]} {v:.1f}' for k, v in result.timings_ms.items()
@@ -48,6 +51,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     print(f'  final:   J={c.J:.3f} J_L={c.J_L:.3f} J_R={c.J_R:.3f} {k}'
           f'feasible={result.feasible} (pitch {result.angles.max_pitch_deg:.1f} deg, '
           f'turn {result.angles.max_turn_deg:.1f} deg)')
+    if result.clearance is not None:
+        print(f'  clearance: zones {result.clearance.zones_m:.3f} m, terrain '
+              f'{result.clearance.terrain_m:.3f} m above the floor')
     print(f'  time: {result.timings_ms["total_ms"]:.1f} ms ({stages} ms)')
     if args.record:
         print(f'  recorded: {recording}')
@@ -58,7 +64,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         plot_plan(args.plot, scenario.threats, scenario.box, scenario.start, scenario.goal,
                   result.network.nodes, result.network.edges, result.initial_path,
                   result.path, title=f'{scenario.name}: {cfg.method}, w={cfg.w:g}, '
-                                     f'J={c.J:.1f}')
+                                     f'J={c.J:.1f}',
+                  airspace=scenario.airspace or None)
     return 0
 
 

@@ -76,9 +76,14 @@ class Problem:
     progress: Optional[Callable[[int, int], None]] = None
     candidates: dict[tuple[int, int], float] = field(default_factory=dict)
     k_sweep: dict[float, float] = field(default_factory=dict)
+    # airspace hook (issue 12): zones and terrain; None plans exactly as before.
+    airspace: Optional['Airspace'] = None  # noqa: F821
 
     def cost(self, points: NDArray) -> Cost:
-        """Exact J of a path through this problem's threats."""
+        """Exact J of a path through this problem's threats (masked if the terrain masks)."""
+        if self.airspace is not None and self.airspace.masking:
+            from threat_planner.core.airspace_planning import masked_cost
+            return masked_cost(points, self.threats, self.config.w, self.airspace)
         return path_cost(points, self.threats.positions, self.threats.intensities,
                          self.config.w)
 

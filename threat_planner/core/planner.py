@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
+from threat_planner.core.airspace import Airspace
 from threat_planner.core.config import PlannerConfig
 from threat_planner.core.methods import Candidate, Clock, K_SWEEP, METHOD_FUNCTIONS, Problem
 from threat_planner.core.methods import refine
@@ -50,7 +51,8 @@ def check_endpoints(start: ArrayLike, goal: ArrayLike, box: Box,
 def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
          config: PlannerConfig = PlannerConfig(),
          progress: Callable[[int, int], None] | None = None,
-         warm_start: PlanResult | None = None) -> PlanResult:
+         warm_start: PlanResult | None = None,
+         airspace: Airspace | None = None) -> PlanResult:
     """Plan a path from start to goal through the threat field.
 
     Args:
@@ -62,6 +64,7 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         progress: Optional callback (done, total) for long sweeps.
         warm_start: The previous plan; after a small change (core/warm.py states the
             rule) its path is refined instead of planning from scratch.
+        airspace: No-fly zones and terrain to respect (method 'best' only), or None.
 
     Returns:
         The PlanResult.
@@ -76,16 +79,24 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         raise InputError(f'min_altitude_m: must be below the box height {height:g}, '
                          f'got {float(config.min_altitude_m):g}')
     s, t = check_endpoints(start, goal, box, threats)
+    if airspace:   # airspace hook (issue 12)
+        if config.method != 'best':
+            raise InputError(f'method: no-fly zones and terrain need method best, '
+                             f'got {config.method}')
+        airspace.check_point('start', s)
+        airspace.check_point('goal', t)
+    else:
+        airspace = None
     # The optimisers make thousands of tiny BLAS calls; a threaded BLAS spends longer waking
     # its threads than computing, and far longer when the cores are busy (measured: 4x).
     with threadpool_limits(1, user_api='blas'):
         note = ''
-        if warm_start is not None:
+        if warm_start is not None and airspace is None:
             warm = _plan_warm(warm_start, threats, s, t, box, config)
             if isinstance(warm, PlanResult):
                 return warm
             note = warm
-        result = _plan(threats, s, t, box, config, progress)
+        result = _plan(threats, s, t, box, config, progress, airspace)
         result.warm_note = note
         return result
 
@@ -108,7 +119,8 @@ def _plan_warm(previous: PlanResult, threats: ThreatField, s: NDArray, t: NDArra
 
 
 def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: PlannerConfig,
-          progress: Callable[[int, int], None] | None) -> PlanResult:
+          progress: Callable[[int, int], None] | None,
+          airspace: Airspace | None = None) -> PlanResult:
     clock = Clock()
     if config.network == 'threats':
         network = paper_network(threats.positions, box)
@@ -116,13 +128,19 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
         network = build_network(threats.positions, box, config.box_divisions)
     clock.lap('partition_ms')
     edge_j = None
-    if config.method != 'paper':
+    if config.method != 'paper' and airspace is None:
         edge_j = edge_threat_costs(network, threats, threats.typical_spacing(box),
                                    volume=float(np.prod(box.hi - box.lo)))
     clock.lap('edge_costs_ms')
     problem = Problem(threats=threats, s=s, t=t, box=box, config=config, network=network,
-                      edge_j=edge_j, clock=clock, progress=progress)
-    best = METHOD_FUNCTIONS[config.method](problem)
+                      edge_j=edge_j, clock=clock, progress=progress, airspace=airspace)
+    if airspace is not None:   # airspace hook (issue 12)
+        from threat_planner.core.airspace_planning import plan_in_airspace
+        best = plan_in_airspace(problem)
+        network = problem.network
+        edge_j = None
+    else:
+        best = METHOD_FUNCTIONS[config.method](problem)
     if not np.isfinite(best.cost.J):
         raise PlanningError(
             f'cost: no path with a finite J was found (J = {best.cost.J}); the intensities '
@@ -148,4 +166,6 @@ def _result(problem: Problem, best: Candidate, warm_note: str = '') -> PlanResul
         edge_cutoff=None if edge_j is None else edge_j.radius, timings_ms=timings,
         limits=problem.limits, limit_check=best.limit_check or problem.check(best.final),
         warm=bool(warm_note), warm_note=warm_note, basin_margin=best.basin_margin,
-        problem=(problem.threats, problem.s, problem.t, problem.box, config))
+        problem=(problem.threats, problem.s, problem.t, problem.box, config),
+        clearance=None if problem.airspace is None
+        else problem.airspace.clearance(best.final))

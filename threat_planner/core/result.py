@@ -49,6 +49,8 @@ class PlanResult:
         warm_note: Why a warm start was used or refused ('' for a cold plan).
         basin_margin: Relative J gap between the best and second-best screened basin.
         problem: (threats, start, goal, box, config) planned, kept for warm starts.
+        clearance: Smallest margins of the final path to the zones and the terrain
+            floor (an ``airspace.Clearance``), or None without an airspace.
     """
 
     method: str
@@ -78,6 +80,8 @@ class PlanResult:
     warm_note: str = ''
     basin_margin: float = float('inf')
     problem: tuple[ThreatField, NDArray, NDArray, Box, object] | None = None
+    # airspace hook (issue 12): margins of the final path, None without an airspace.
+    clearance: 'Clearance | None' = None  # noqa: F821
 
     @property
     def feasible(self) -> bool:
@@ -120,4 +124,5 @@ class PlanResult:
             'worst_violation': None if self.limit_check is None else self.limit_check.worst,
             'warm': self.warm,
             'timings_ms': self.timings_ms,
+            **({} if self.clearance is None else {'clearance': self.clearance.as_dict()}),
         }

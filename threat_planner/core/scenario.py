@@ -9,18 +9,21 @@ Layout (as in the bundled ``test/data/*.yaml``)::
     start: [x, y, z]
     goal: [x, y, z]
     threats:
-      - {position: [x, y, z], intensity: F}
+      - {position: [x, y, z], intensity: F}   # optional lethal_radius: r
+
+and optionally ``no_fly_zones`` and ``terrain`` (see :mod:`threat_planner.core.airspace`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import difflib
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from threat_planner.core.airspace import Airspace
 from threat_planner.errors import InputError, ScenarioError
 from threat_planner.core.planner import check_endpoints
 from threat_planner.core.threats import Box, ThreatField
@@ -47,16 +50,24 @@ class Scenario:
     start: np.ndarray
     goal: np.ndarray
     threats: ThreatField
+    airspace: Airspace = field(default_factory=Airspace)
 
     def to_dict(self) -> dict:
         """Return the scenario in the YAML file layout."""
-        return {
+        out = {
             'name': self.name, 'frame_id': self.frame_id, 'description': self.description,
             'bounds': {'min': self.box.lo.tolist(), 'max': self.box.hi.tolist()},
             'start': self.start.tolist(), 'goal': self.goal.tolist(),
             'threats': [{'position': p.tolist(), 'intensity': float(f)}
                         for p, f in zip(self.threats.positions, self.threats.intensities)],
         }
+        if self.airspace:
+            lethal = self.airspace.lethal_radii(len(self.threats))
+            for t, r in zip(out['threats'], lethal):
+                if np.isfinite(r):
+                    t['lethal_radius'] = float(r)
+            out.update(self.airspace.to_mapping())
+        return out
 
 
 #: Keys a scenario file may hold; the airspace keys are read by the airspace layer.
@@ -105,27 +116,36 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
     threats = data['threats'] if data['threats'] is not None else []
     if not isinstance(threats, list):
         raise fail('field "threats" must be a list')
-    positions, intensities = [], []
+    positions, intensities, lethal = [], [], []
     for i, t in enumerate(threats):
         if not isinstance(t, dict) or 'position' not in t or 'intensity' not in t:
             raise fail(f'threats[{i}] needs "position" and "intensity"')
         _check_keys(t, THREAT_KEYS, f'threats[{i}].', fail)
         positions.append(t['position'])
         intensities.append(t['intensity'])
+        lethal.append(t.get('lethal_radius', float('nan')))
     try:
         for i, p in enumerate(positions):
             if not isinstance(p, (list, tuple)) or len(p) != 3:
                 raise InputError(f'threats[{i}].position: expected [x, y, z], got {p!r}')
         box = Box.from_corners(bounds['min'], bounds['max'])
-        field = ThreatField.from_arrays(np.array(positions, dtype=float).reshape(-1, 3),
-                                        np.array(intensities, dtype=float))
-        start, goal = check_endpoints(data['start'], data['goal'], box, field)
+        threat_field = ThreatField.from_arrays(
+            np.array(positions, dtype=float).reshape(-1, 3), np.array(intensities, dtype=float))
+        start, goal = check_endpoints(data['start'], data['goal'], box, threat_field)
+        base = None if source.startswith('<') else Path(source).parent
+        airspace = Airspace.from_mapping(
+            {k: data[k] for k in ('no_fly_zones', 'terrain') if k in data}, base,
+            lethal_radii=[float('nan') if r is None else r for r in lethal],
+            threat_positions=threat_field.positions)
+        airspace.check_point('start', start)
+        airspace.check_point('goal', goal)
     except InputError as exc:
         raise fail(str(exc)) from None
     except (TypeError, ValueError, OverflowError) as exc:
         raise fail(f'bad value ({exc})') from None
     return Scenario(str(data.get('name', Path(source).stem)), str(data.get('frame_id', 'map')),
-                    str(data.get('description', '') or ''), box, start, goal, field)
+                    str(data.get('description', '') or ''), box, start, goal, threat_field,
+                    airspace)
 
 
 def load_scenario(path: str | Path) -> Scenario:
