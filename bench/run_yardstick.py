@@ -95,24 +95,30 @@ def write_markdown(results: dict, out: Path) -> None:
         'a quadratic-penalty L-BFGS-B continuation where SLSQP ends infeasible; lowest '
         'feasible kept. R = 0.1 x the shortest horizontal box edge (10 m on 100 m fields).',
         '* **seconds**: in-box (grid build counted in each w of a scenario) + limited.', '',
+        '* **starts**: feasible limited starts / all, and the worst feasible start\'s J over '
+        'the best (the limited problem has several local optima).', '',
         '| case | G | in-box J | ratio box | ratio lb | limited J | limited / in-box '
-        '| limits C/D/R | achieved C/D/R | seconds |',
-        '|---|---|---|---|---|---|---|---|---|---|']
+        '| limits C/D/R | achieved C/D/R | starts | seconds |',
+        '|---|---|---|---|---|---|---|---|---|---|---|']
+
+    def ratio(value: float, base: float | None, digits: int = 4) -> str:
+        return f'{value / base:.{digits}f}' if base else '-'
+
     for key in sorted(results):
         r = results[key]
         inb, lim, st = r['in_box'], r['limited'], r['settings']
-        rb = ref_box.get(key, {}).get('J')
-        lb = ref.get(key, {}).get('J')
         a = lim['achieved']
+        feas = [s['J'] for s in lim['starts'] if s['feasible']]
+        spread = f'{max(feas) / min(feas):.3f}' if feas else '-'
         lines.append(
-            f"| {key} | {st['grid']} | {inb['J']:.3f} | "
-            f"{inb['J'] / rb:.4f} | " if rb else f"| {key} | {st['grid']} | {inb['J']:.3f} | - | ")
-        lines[-1] += (f"{inb['J'] / lb:.4f} | " if lb else '- | ')
-        lines[-1] += (
-            f"{lim['J']:.3f} | {lim['J'] / inb['J']:.4f} | "
-            f"{st['max_climb_deg']:g}/{st['max_dive_deg']:g}/{st['min_turn_radius_m']:g} | "
-            f"{a['max_climb_deg']:.2f}/{a['max_dive_deg']:.2f}/{a['min_turn_radius_m']:.2f} | "
-            f"{inb['seconds']:.0f} + {lim['seconds']:.0f} |")
+            f"| {key} | {st['grid']} | {inb['J']:.3f} "
+            f"| {ratio(inb['J'], ref_box.get(key, {}).get('J'), 5)} "
+            f"| {ratio(inb['J'], ref.get(key, {}).get('J'))} "
+            f"| {lim['J']:.3f} | {ratio(lim['J'], inb['J'])} "
+            f"| {st['max_climb_deg']:g}/{st['max_dive_deg']:g}/{st['min_turn_radius_m']:g} "
+            f"| {a['max_climb_deg']:.2f}/{a['max_dive_deg']:.2f}/{a['min_turn_radius_m']:.2f} "
+            f"| {len(feas)}/{len(lim['starts'])}, {spread} "
+            f"| {inb['seconds']:.0f} + {lim['seconds']:.0f} |")
     out.write_text('\n'.join(lines) + '\n')
 
 
