@@ -15,6 +15,8 @@ fields, 100 m on big300_0; 60 equal-ish segments). Fields wider than 500 m use t
 ``--big-grid`` grid. Results are cached per ``scenario@w`` in ``bench/results/yardstick.json``
 (recomputed only with ``--force`` or other settings) and tabulated in
 ``bench/results/yardstick.md`` with the ratio to ``/work/shared/scenarios/reference_box.json``.
+Runs split over processes (``--out`` elsewhere) are folded in with ``--merge OTHER.json``;
+``--table-only`` just rewrites the table from the cache.
 """
 
 from __future__ import annotations
@@ -137,6 +139,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument('--segments', type=int, default=60, help='segments of the limited path')
     p.add_argument('--spacing', type=float, default=1.5, help='segment length spread')
     p.add_argument('--force', action='store_true', help='recompute cached cases')
+    p.add_argument('--merge', type=Path, nargs='+', default=[],
+                   help="other runs' yardstick.json to fold into the cache first")
+    p.add_argument('--table-only', action='store_true', help='only rewrite yardstick.md')
     p.add_argument('--out', type=Path, default=RESULTS)
     args = p.parse_args(argv)
     ref = json.loads((bt.LOCAL_SCENARIOS / 'reference.json').read_text())
@@ -148,7 +153,11 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     cache_path = args.out / 'yardstick.json'
     results = json.loads(cache_path.read_text()) if cache_path.exists() else {}
-    for name in names:
+    for other in args.merge:
+        results.update(json.loads(other.read_text()))
+    if args.merge:
+        cache_path.write_text(json.dumps(results, indent=1, allow_nan=True))
+    for name in [] if args.table_only else names:
         sc = load_scenario(bt.LOCAL_SCENARIOS / f'{name}.yaml')
         span = sc.box.hi - sc.box.lo
         grid = args.big_grid if float(span.max()) > 500.0 else args.grid
