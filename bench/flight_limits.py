@@ -164,8 +164,9 @@ class LimitConstraints:
             uu, vv = np.sum(u * u, axis=1), np.sum(v * v, axis=1)
             ww = np.sum((u - v) ** 2, axis=1)
             # (R_min / R)^2 = 4 R_min^2 sin^2 t / |u - v|^2, sin^2 t = |u x v|^2 / (uu vv)
-            parts.append(1.0 - 4.0 * self.r_min ** 2 * np.sum(cr * cr, axis=1)
-                         / (uu * vv * ww))
+            # A tiny floor keeps coincident vertices (met in line searches) from giving NaN.
+            den = uu * vv * ww + (1e-12 * s) ** 6
+            parts.append(1.0 - 4.0 * self.r_min ** 2 * np.sum(cr * cr, axis=1) / den)
         return np.concatenate(parts)
 
     def __call__(self, z: NDArray) -> NDArray:
