@@ -26,6 +26,8 @@ from mcap.writer import CompressionType, Writer
 import yaml
 
 from threat_planner.bag.cdr import canonical_cdr
+from threat_planner.bag.metadata import (bag_information, file_entry, topic_entry,
+                                         write_bag_metadata)
 from threat_planner.errors import RecordingError
 
 __all__ = ['RepairReport', 'repair_recording']
@@ -247,40 +249,13 @@ def _metadata(old: dict, files: List[Tuple[str, _Recovered]]) -> dict:
                 qos = yaml.safe_load(channel.metadata.get('offered_qos_profiles', '')) or []
             except yaml.YAMLError:
                 qos = []
-            entry = topics.setdefault(channel.topic, {
-                'topic_metadata': {
-                    'name': channel.topic,
-                    'type': schema.name if schema is not None else '',
-                    'serialization_format': channel.message_encoding,
-                    'offered_qos_profiles': qos,
-                    'type_description_hash': channel.metadata.get('topic_type_hash', ''),
-                },
-                'message_count': 0})
+            entry = topics.setdefault(channel.topic, topic_entry(
+                channel.topic, schema.name if schema is not None else '',
+                channel.message_encoding, qos, channel.metadata.get('topic_type_hash', ''), 0))
             entry['message_count'] += found.counts[cid]
-        count = sum(found.counts.values())
-        start = found.start_ns or 0
-        entries.append({'path': name, 'starting_time': {'nanoseconds_since_epoch': start},
-                        'duration': {'nanoseconds': (found.end_ns or 0) - start},
-                        'message_count': count})
-    starts = [f.start_ns for _, f in files if f.start_ns is not None]
-    ends = [f.end_ns for _, f in files if f.end_ns is not None]
-    start = min(starts) if starts else 0
-    info = dict(old)
-    info.update({
-        'version': old.get('version', 9),
-        'storage_identifier': 'mcap',
-        'duration': {'nanoseconds': (max(ends) - start) if ends else 0},
-        'starting_time': {'nanoseconds_since_epoch': start},
-        'message_count': sum(e['message_count'] for e in entries),
-        'topics_with_message_count': list(topics.values()),
-        'compression_format': old.get('compression_format', ''),
-        'compression_mode': old.get('compression_mode', ''),
-        'relative_file_paths': [name for name, _ in files],
-        'files': entries,
-    })
-    info.setdefault('custom_data', None)
-    info.setdefault('ros_distro', os.environ.get('ROS_DISTRO', 'jazzy'))
-    return info
+        entries.append(file_entry(name, found.start_ns, found.end_ns,
+                                  sum(found.counts.values())))
+    return bag_information(topics.values(), entries, base=old)
 
 
 def _bag_files(bag: Path) -> Tuple[dict, List[str]]:
@@ -318,15 +293,7 @@ def _repair_bag(bag: Path, target: Optional[Path], in_place: bool,
         report, found = _repair_file(bag / name, out_dir / name, in_place, fix_cdr)
         total.add(report)
         files.append((name, found))
-    text = yaml.safe_dump({'rosbag2_bagfile_information': _metadata(old, files)},
-                          sort_keys=False, default_flow_style=False)
-    meta = out_dir / 'metadata.yaml'
-    tmp = meta.with_suffix('.yaml.tmp')
-    try:
-        tmp.write_text(text, encoding='utf-8')
-    except OSError as exc:
-        raise RecordingError(f'{meta}: cannot write ({exc.strerror or exc})') from exc
-    _replace_atomically(tmp, meta)
+    write_bag_metadata(out_dir, _metadata(old, files))
     return total
 
 

@@ -17,7 +17,6 @@ Typical use::
         ...
 """
 
-import contextlib
 import dataclasses
 import datetime
 import importlib
@@ -30,12 +29,13 @@ import time
 from typing import Dict, Optional, Union
 
 from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
-import yaml
 
 from threat_planner.bag.cdr import canonical_cdr
 from threat_planner.bag.definitions import (canonical_type_name, MESSAGE_ENCODING,
                                             message_definition, message_type_name, PROFILE,
                                             SCHEMA_ENCODING, type_description_hash)
+from threat_planner.bag.metadata import (bag_information, file_entry, io_reason,
+                                         topic_entry, write_bag_metadata)
 from threat_planner.bag.qos import as_topic_qos, TopicQos
 from threat_planner.errors import RecordingError
 
@@ -45,7 +45,6 @@ _LOG = logging.getLogger(__name__)
 
 PathLike = Union[str, os.PathLike]
 
-METADATA_VERSION = 9
 DEFAULT_CHUNK_SIZE = 256 * 1024
 DEFAULT_FLUSH_INTERVAL_S = 1.0
 
@@ -143,7 +142,7 @@ class McapRecorder:
                 self._write_metadata()
         except (OSError, RecordingError) as exc:
             self._release()
-            raise RecordingError(f'{path}: cannot create recording: {_reason(exc)}') \
+            raise RecordingError(f'{path}: cannot create recording: {io_reason(exc)}') \
                 from exc
         self._interval = float(flush_interval_s) if flush_interval_s else 0.0
         self._last_flush = time.monotonic()
@@ -348,8 +347,8 @@ class McapRecorder:
     def _fail(self, what: str, exc: BaseException) -> RecordingError:
         """Remember the first I/O error and return the error to raise for it."""
         if self._failed is None:
-            self._failed = f'{what}: {_reason(exc)}'
-        return RecordingError(f'{self._path}: {what}: {_reason(exc)}')
+            self._failed = f'{what}: {io_reason(exc)}'
+        return RecordingError(f'{self._path}: {what}: {io_reason(exc)}')
 
     def _release(self) -> None:
         """Close the file without writing more; buffered bytes that cannot go are lost."""
@@ -436,57 +435,8 @@ class McapRecorder:
         self._pending = 0
 
     def _write_metadata(self) -> None:
-        start = self._start_ns or 0
-        duration = (self._end_ns - self._start_ns) if self._count else 0
-        name = self._path.name
-        info = {
-            'version': METADATA_VERSION,
-            'storage_identifier': 'mcap',
-            'duration': {'nanoseconds': duration},
-            'starting_time': {'nanoseconds_since_epoch': start},
-            'message_count': self._count,
-            'topics_with_message_count': [
-                {
-                    'topic_metadata': {
-                        'name': topic,
-                        'type': entry.type_name,
-                        'serialization_format': MESSAGE_ENCODING,
-                        'offered_qos_profiles': [entry.qos.as_dict()],
-                        'type_description_hash': type_description_hash(entry.type_name),
-                    },
-                    'message_count': entry.count,
-                }
-                for topic, entry in self._topics.items()
-            ],
-            # Chunk compression is internal to MCAP; rosbag2 leaves these empty for it.
-            'compression_format': '',
-            'compression_mode': '',
-            'relative_file_paths': [name],
-            'files': [{
-                'path': name,
-                'starting_time': {'nanoseconds_since_epoch': start},
-                'duration': {'nanoseconds': duration},
-                'message_count': self._count,
-            }],
-            'custom_data': None,
-            'ros_distro': os.environ.get('ROS_DISTRO', 'jazzy'),
-        }
-        text = yaml.safe_dump({'rosbag2_bagfile_information': info}, sort_keys=False,
-                              default_flow_style=False)
-        target = self._bag_dir / 'metadata.yaml'
-        tmp = target.with_suffix('.yaml.tmp')
-        try:
-            tmp.write_text(text, encoding='utf-8')
-            os.replace(tmp, target)
-        except OSError as exc:
-            with contextlib.suppress(OSError):
-                tmp.unlink()
-            raise RecordingError(f'{target}: cannot write bag metadata: {_reason(exc)}') \
-                from exc
-
-
-def _reason(exc: BaseException) -> str:
-    """Return the one-line reason of an I/O error, without the file name repeated."""
-    if isinstance(exc, OSError) and exc.strerror:
-        return exc.strerror
-    return str(exc)
+        topics = [topic_entry(topic, e.type_name, MESSAGE_ENCODING, [e.qos.as_dict()],
+                              type_description_hash(e.type_name), e.count)
+                  for topic, e in self._topics.items()]
+        files = [file_entry(self._path.name, self._start_ns, self._end_ns, self._count)]
+        write_bag_metadata(self._bag_dir, bag_information(topics, files))

@@ -158,9 +158,10 @@ class ProcessPlanWorker:
     The executor keeps answering services and parameters while a plan runs; a plan is
     stopped by killing its process: on shutdown (at once), when it exceeds the request's
     ``settings.max_plan_time_s`` (reported as an ``'error'`` phase), and when a newer
-    request waits and the plan has run :data:`CANCEL_STALE_AFTER_S` (a ``'cancelled'``
-    phase). A warm spare process takes over after a kill, so the next plan does not wait
-    for the imports of a new one.
+    request waits and the plan has run :data:`CANCEL_STALE_AFTER_S`, unless the previous
+    plan was cancelled too (a ``'cancelled'`` phase; so some plan always finishes). A warm
+    spare process takes over after a kill, so the next plan does not wait for the imports
+    of a new one.
 
     Parameters
     ----------
@@ -178,6 +179,7 @@ class ProcessPlanWorker:
         self._stopped = threading.Event()
         self._child = _PlanProcess()
         self._spare: Optional[_PlanProcess] = _PlanProcess()
+        self._cancelled_last = False   # only the worker thread reads and writes it
         self._worker = PlanWorker(self._run, name=name)
 
     def submit(self, job: object) -> bool:
@@ -218,6 +220,7 @@ class ProcessPlanWorker:
                 if self._child.conn.poll(POLL_S):
                     phase, outcome = self._child.conn.recv()
                     if phase == 'end':
+                        self._cancelled_last = False
                         return
                     self._hand_over(phase, outcome)
                     continue
@@ -229,7 +232,12 @@ class ProcessPlanWorker:
                         error=f'timed out after {running:.1f} s (max_plan_time_s={limit:g}); '
                               'the previous plan stays latched'))
                     return
-                if self._worker.has_pending and running >= CANCEL_STALE_AFTER_S:
+                # A stale plan gives way to the newer request, but never twice in a row:
+                # inputs faster than plans would otherwise starve the outputs (no plan
+                # ever finishing), so after a cancel the next plan always runs to its end.
+                if (self._worker.has_pending and running >= CANCEL_STALE_AFTER_S
+                        and not self._cancelled_last):
+                    self._cancelled_last = True
                     self._replace_child()
                     self._hand_over('cancelled', PlanOutcome(request, plan_ms=1e3 * running))
                     return
