@@ -78,6 +78,16 @@ class Problem:
     k_sweep: dict[float, float] = field(default_factory=dict)
     # airspace hook (issue 12): zones and terrain; None plans exactly as before.
     airspace: Optional['Airspace'] = None  # noqa: F821
+    #: Called with the network route's polyline and its exact cost as soon as the search
+    #: has one, before smoothing and optimisation (a caller that may stop the plan early
+    #: keeps it as the best path so far).
+    on_initial: Optional[Callable[[NDArray, Cost], None]] = None
+
+    def route_found(self, seq: list[int]) -> None:
+        """Hand the route `seq` (S, its nodes, T) to :attr:`on_initial`, if set."""
+        if self.on_initial is not None and seq:
+            points = np.vstack([self.s, self.network.nodes[seq], self.t])
+            self.on_initial(points, self.cost(points))
 
     def cost(self, points: NDArray) -> Cost:
         """Exact J of a path through this problem's threats (masked if the terrain masks)."""
@@ -161,6 +171,7 @@ def plan_paper(p: Problem) -> Candidate:
     seq = dijkstra_pairs(p.network, p.network.edge_lengths, np.array([entry]),
                          np.array([exit_]))
     p.clock.lap('search_ms')
+    p.route_found(seq[(entry, exit_)][0])
     best = _smooth_route(p, seq[(entry, exit_)][0], p.config.k)
     p.clock.lap('smoothing_ms')
     return _sweep_k(p, best) if p.config.auto_k else best
@@ -174,6 +185,8 @@ def plan_improved(p: Problem) -> Candidate:
     routes = dijkstra_pairs(p.network, p.edge_j.weights(p.network.edge_lengths, cfg.w),
                             entries, exits)
     p.clock.lap('search_ms')
+    if routes:
+        p.route_found(min(routes.values(), key=lambda route: route[1])[0])
     best = None
     for n_done, (pair, (seq, _)) in enumerate(routes.items(), 1):
         cand = _smooth_route(p, seq, cfg.k)
@@ -201,6 +214,7 @@ def plan_best(p: Problem) -> Candidate:
                                 p.edge_j.combine(legs_s, len_s, cfg.w), entries,
                                 p.edge_j.combine(legs_t, len_t, cfg.w), exits, cfg.routes)
     p.clock.lap('search_ms')
+    p.route_found(routes[0])
     if not cfg.optimise:
         best = _smooth_route(p, routes[0], cfg.k)
         p.clock.lap('smoothing_ms')

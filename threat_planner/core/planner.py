@@ -14,6 +14,7 @@ from threadpoolctl import threadpool_limits
 
 from threat_planner.core.airspace import Airspace
 from threat_planner.core.config import PlannerConfig
+from threat_planner.core.cost import Cost
 from threat_planner.core.methods import Candidate, Clock, K_SWEEP, METHOD_FUNCTIONS, Problem
 from threat_planner.core.methods import refine
 from threat_planner.core.partition import build_network, paper_network
@@ -52,7 +53,8 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
          config: PlannerConfig = PlannerConfig(),
          progress: Callable[[int, int], None] | None = None,
          warm_start: PlanResult | None = None,
-         airspace: Airspace | None = None) -> PlanResult:
+         airspace: Airspace | None = None,
+         on_initial: Callable[[NDArray, Cost], None] | None = None) -> PlanResult:
     """Plan a path from start to goal through the threat field.
 
     Args:
@@ -65,6 +67,9 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         warm_start: The previous plan; after a small change (core/warm.py states the
             rule) its path is refined instead of planning from scratch.
         airspace: No-fly zones and terrain to respect (method 'best' only), or None.
+        on_initial: Optional callback (points (M, 3) [m], exact Cost) with the network
+            route as soon as the search has found it, before smoothing and optimisation
+            (a cold plan without airspace; a caller that may stop the plan keeps it).
 
     Returns:
         The PlanResult.
@@ -96,7 +101,7 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
             if isinstance(warm, PlanResult):
                 return warm
             note = warm
-        result = _plan(threats, s, t, box, config, progress, airspace)
+        result = _plan(threats, s, t, box, config, progress, airspace, on_initial)
         result.warm_note = note
         return result
 
@@ -120,7 +125,8 @@ def _plan_warm(previous: PlanResult, threats: ThreatField, s: NDArray, t: NDArra
 
 def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: PlannerConfig,
           progress: Callable[[int, int], None] | None,
-          airspace: Airspace | None = None) -> PlanResult:
+          airspace: Airspace | None = None,
+          on_initial: Callable[[NDArray, Cost], None] | None = None) -> PlanResult:
     clock = Clock()
     if config.network == 'threats':
         network = paper_network(threats.positions, box)
@@ -133,7 +139,8 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
                                    volume=float(np.prod(box.hi - box.lo)))
     clock.lap('edge_costs_ms')
     problem = Problem(threats=threats, s=s, t=t, box=box, config=config, network=network,
-                      edge_j=edge_j, clock=clock, progress=progress, airspace=airspace)
+                      edge_j=edge_j, clock=clock, progress=progress, airspace=airspace,
+                      on_initial=on_initial)
     if airspace is not None:   # airspace hook (issue 12)
         from threat_planner.core.airspace_planning import plan_in_airspace
         best = plan_in_airspace(problem)

@@ -374,6 +374,8 @@ class ThreatPlannerNode(Node):
                 self.get_logger().info(messages[-1][1].status[0].message)
             elif phase == 'error':
                 self.get_logger().error(messages[-1][1].status[0].message)
+            elif phase == 'timeout':   # issue 14: timed out, best path so far published
+                self.get_logger().warning(messages[-1][1].status[0].message)
 
     # -- life cycle ------------------------------------------------------------------
 

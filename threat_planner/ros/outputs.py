@@ -2,7 +2,9 @@
 
 :func:`run_plan` plans one :class:`PlanRequest` and hands its outputs over in phases, as
 soon as each is ready: ``'paths'`` (``initial_path`` and ``path``), then ``'done'``
-(``network`` markers and ``plan_info``), or ``'error'`` (an ERROR ``plan_info``).
+(``network`` markers and ``plan_info``), or ``'error'`` (an ERROR ``plan_info``); a caller
+that may stop the plan early also gets the network route as soon as the search has it, and
+publishes it with :func:`timeout_outcome` (phase ``'timeout'``) when it stops the plan.
 :func:`outcome_messages` gives the (topic, message) pairs of a phase in publishing order.
 """
 
@@ -19,6 +21,7 @@ from nav_msgs.msg import Path
 from numpy.typing import NDArray
 from visualization_msgs.msg import MarkerArray
 
+from threat_planner.core.cost import Cost
 from threat_planner.core.planner import plan
 from threat_planner.core.result import PlanResult
 from threat_planner.core.threats import Box, ThreatField
@@ -28,7 +31,8 @@ from threat_planner.ros.conversions import (network_markers, path_to_msg, plan_i
 from threat_planner.ros.parameters import NodeSettings
 
 __all__ = ['PlanOutcome', 'PlanRequest', 'input_values', 'outcome_messages', 'plan_done_info',
-           'plan_error_info', 'plan_markers', 'run_plan']
+           'plan_error_info', 'plan_markers', 'plan_timeout_info', 'run_plan',
+           'timeout_outcome']
 
 
 @dataclass(frozen=True)
@@ -57,6 +61,10 @@ class PlanOutcome:
     network_error: Optional[str] = None
     error: Optional[str] = None
     exception: Optional[Exception] = None
+    #: The best path so far of a plan not finished yet (the network route) and its cost.
+    best_so_far: Optional[Path] = None
+    best_so_far_cost: Optional[Cost] = None
+    best_so_far_points: int = 0
     queue_ms: float = 0.0
     plan_ms: float = 0.0
     messages_ms: float = 0.0
@@ -64,7 +72,8 @@ class PlanOutcome:
 
 def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None],
              now_ns: Callable[[], int],
-             progress: Optional[Callable[[int, int], None]] = None) -> PlanOutcome:
+             progress: Optional[Callable[[int, int], None]] = None,
+             early: Optional[Callable[[PlanOutcome], None]] = None) -> PlanOutcome:
     """Plan `request` and build its messages, handing each phase over when it is ready.
 
     Parameters
@@ -77,6 +86,9 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
         The clock the request's ``received_ns`` was read from [ns].
     progress : callable, optional
         ``progress(done, total)`` for long sweeps.
+    early : callable, optional
+        Called with an outcome holding ``best_so_far`` (the network route) as soon as the
+        search has found it, before the smoothing and optimisation.
 
     Returns
     -------
@@ -88,9 +100,17 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
     t0 = time.perf_counter()
     outcome.queue_ms = max(0.0, 1e-6 * (now_ns() - request.received_ns))
     s = request.settings
+
+    def on_initial(points, cost: Cost) -> None:
+        partial = PlanOutcome(request, queue_ms=outcome.queue_ms,
+                              plan_ms=1e3 * (time.perf_counter() - t0))
+        partial.best_so_far = path_to_msg(points, s.frame_id, request.stamp)
+        partial.best_so_far_cost, partial.best_so_far_points = cost, len(points)
+        early(partial)
+
     try:
         result = plan(request.threats, request.start, request.goal, s.box, s.config,
-                      progress=progress)
+                      progress=progress, on_initial=None if early is None else on_initial)
         t1 = time.perf_counter()
         outcome.plan_ms = 1e3 * (t1 - t0)
         outcome.result = result
@@ -137,6 +157,9 @@ def outcome_messages(phase: str, outcome: PlanOutcome,
 
     """
     req = outcome.request
+    if phase == 'timeout':
+        return [('initial_path', outcome.best_so_far), ('path', outcome.best_so_far),
+                ('plan_info', plan_timeout_info(values, outcome))]
     if phase == 'paths':
         return [('initial_path', outcome.initial_path), ('path', outcome.path)]
     if phase == 'error':
@@ -156,6 +179,49 @@ def plan_error_info(values: Mapping[str, object], seq: int, source: str, error: 
     values['error'] = error
     return plan_info_msg('ERROR', f'plan for input #{seq} ({source}) failed: {error}',
                          values, stamp)
+
+
+def timeout_outcome(request: PlanRequest, best_so_far: Optional[PlanOutcome],
+                    running_s: float, limit_s: float) -> tuple[str, PlanOutcome]:
+    """Return the phase and outcome of a plan stopped by ``max_plan_time_s``.
+
+    Parameters
+    ----------
+    request : PlanRequest
+        The plan stopped.
+    best_so_far : PlanOutcome or None
+        The early outcome with the network route, if the search had finished.
+    running_s, limit_s : float
+        How long the plan ran and its limit [s].
+
+    Returns
+    -------
+    tuple of (str, PlanOutcome)
+        ``'timeout'`` with the best path so far to publish, or ``'error'`` without one.
+
+    """
+    error = f'timed out after {running_s:.1f} s (max_plan_time_s={limit_s:g})'
+    if best_so_far is None:
+        return 'error', PlanOutcome(request, plan_ms=1e3 * running_s,
+                                    error=error + '; the previous plan stays latched')
+    best_so_far.plan_ms = 1e3 * running_s
+    best_so_far.error = (error + '; published the best path so far: the network route, '
+                         'before smoothing and optimisation')
+    return 'timeout', best_so_far
+
+
+def plan_timeout_info(values: Mapping[str, object], outcome: PlanOutcome) -> DiagnosticArray:
+    """Build the WARN ``plan_info`` of a timed-out plan published with its best path so far."""
+    req, cost = outcome.request, outcome.best_so_far_cost
+    values = dict(values)
+    values.update({'error': outcome.error, 'timed_out': True, 'best_so_far': 'initial',
+                   'method': req.settings.config.method, 'w': req.settings.config.w,
+                   'threats': len(req.threats), 'J': cost.J, 'J_L': cost.J_L,
+                   'J_R': cost.J_R, 'path_points': outcome.best_so_far_points,
+                   'queue_ms': outcome.queue_ms, 'plan_wall_ms': outcome.plan_ms})
+    message = (f'plan for input #{req.seq} ({req.source}) {outcome.error}; '
+               f'J={cost.J:.6g}')
+    return plan_info_msg('WARN', message, values, req.stamp)
 
 
 def input_values(seq: int, source: str, stamp: Time, frame_id: str, received: int,

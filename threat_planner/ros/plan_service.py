@@ -20,7 +20,7 @@ from typing import Callable, Optional
 
 from nav_msgs.msg import Path
 from nav_msgs.srv import GetPlan
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.task import Future
 
@@ -92,9 +92,12 @@ class PlanService:
         self._count = 0
         # Wakes the executor when an answer is ready, so the awaiting callback resumes.
         self._wake = node.create_guard_condition(lambda: None)
+        # Reentrant: a mutually exclusive group stays held while a callback's coroutine
+        # awaits, so the executor would take no further request until the first is answered
+        # (requests waited in the middleware, unbounded, and none was ever refused). Order
+        # is kept: one executor thread takes requests in arrival order into the queue.
         self._service = node.create_service(
-            GetPlan, PLAN_SERVICE, self._serve,
-            callback_group=MutuallyExclusiveCallbackGroup())
+            GetPlan, PLAN_SERVICE, self._serve, callback_group=ReentrantCallbackGroup())
         self._thread = threading.Thread(target=self._loop, name='threat_planner_service',
                                         daemon=True)
         self._thread.start()

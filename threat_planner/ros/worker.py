@@ -124,12 +124,16 @@ def _child_main(conn) -> None:
         outcome.exception = None  # the text is in outcome.error; exceptions may not pickle
         conn.send((phase, outcome))
 
+    def early(outcome) -> None:
+        conn.send(('initial', outcome))
+
     while True:
         try:
             request = conn.recv()
         except (EOFError, OSError):
             return
-        run_plan(request, hand_over, time.time_ns)
+        conn.send(('started', None))
+        run_plan(request, hand_over, time.time_ns, early=early)
         conn.send(('end', None))
 
 
@@ -157,7 +161,8 @@ class ProcessPlanWorker:
 
     The executor keeps answering services and parameters while a plan runs; a plan is
     stopped by killing its process: on shutdown (at once), when it exceeds the request's
-    ``settings.max_plan_time_s`` (reported as an ``'error'`` phase), and when a newer
+    ``settings.max_plan_time_s`` (a ``'timeout'`` phase with the network route as the
+    best path so far when the search had finished, else an ``'error'`` phase), and when a newer
     request waits and the plan has run :data:`CANCEL_STALE_AFTER_S`, unless the previous
     plan was cancelled too (a ``'cancelled'`` phase; so some plan always finishes). A warm
     spare process takes over after a kill, so the next plan does not wait for the imports
@@ -167,7 +172,8 @@ class ProcessPlanWorker:
     ----------
     hand_over : Callable[[str, PlanOutcome], None]
         Called in the worker thread with each phase (``'paths'``, ``'done'``, ``'error'``,
-        ``'cancelled'``), as :func:`threat_planner.ros.outputs.run_plan` hands them over.
+        ``'timeout'``, ``'cancelled'``), as :func:`threat_planner.ros.outputs.run_plan`
+        hands them over.
     name : str
         Thread name.
 
@@ -208,10 +214,13 @@ class ProcessPlanWorker:
     def _run(self, request) -> None:
         import time
 
-        from threat_planner.ros.outputs import PlanOutcome
+        from threat_planner.ros.outputs import PlanOutcome, timeout_outcome
 
-        t0 = time.monotonic()
+        # The plan's clock starts when the child takes the request, not while a new child
+        # still imports (seconds on a busy machine, which would time out a short limit).
+        t0 = None
         limit = request.settings.max_plan_time_s
+        best_so_far = None
         try:
             self._child.conn.send(request)
             while True:
@@ -222,15 +231,20 @@ class ProcessPlanWorker:
                     if phase == 'end':
                         self._cancelled_last = False
                         return
+                    if phase == 'started':
+                        t0 = time.monotonic()
+                        continue
+                    if phase == 'initial':
+                        best_so_far = outcome   # published only if the plan times out
+                        continue
                     self._hand_over(phase, outcome)
+                    continue
+                if t0 is None:
                     continue
                 running = time.monotonic() - t0
                 if running > limit:
                     self._replace_child()
-                    self._hand_over('error', PlanOutcome(
-                        request, plan_ms=1e3 * running,
-                        error=f'timed out after {running:.1f} s (max_plan_time_s={limit:g}); '
-                              'the previous plan stays latched'))
+                    self._hand_over(*timeout_outcome(request, best_so_far, running, limit))
                     return
                 # A stale plan gives way to the newer request, but never twice in a row:
                 # inputs faster than plans would otherwise starve the outputs (no plan
