@@ -30,9 +30,6 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     cfg = config_from(args)
     progress = ProgressBar('sweep')
-    if args.record and scenario.airspace:
-        raise InputError(f'--record: {scenario.name} has no-fly zones or terrain, which '
-                         'recordings do not hold yet')
     if args.record:
         from threat_planner.bag.record import record_plan
         result, recording = record_plan(scenario, cfg, args.record, progress=progress)
