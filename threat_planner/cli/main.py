@@ -13,7 +13,7 @@ from pathlib import Path
 import sys
 
 from threat_planner.cli.bag import add_bag_commands
-from threat_planner.errors import InputError, ThreatPlannerError
+from threat_planner.errors import ThreatPlannerError
 from threat_planner.cli.options import add_planner_options, config_from, overrides, ProgressBar
 from threat_planner.core.planner import plan
 from threat_planner.core.scenario import load_scenario
