@@ -10,13 +10,17 @@ topic                     type                                QoS
 ``threat_poses`` (in)     geometry_msgs/PoseArray             reliable, transient local, 10
 ``start`` (in)            geometry_msgs/PoseStamped           reliable, volatile, 10
 ``goal_pose`` (in)        geometry_msgs/PoseStamped           reliable, volatile, 10
+``no_fly_zones`` (in)     visualization_msgs/MarkerArray      reliable, transient local, 10
+``terrain`` (in)          sensor_msgs/Image (32FC1)           reliable, transient local, 10
 ``initial_path`` (out)    nav_msgs/Path (Dijkstra path)       reliable, transient local, 1
 ``path`` (out)            nav_msgs/Path (final path)          reliable, transient local, 1
 ``network`` (out)         visualization_msgs/MarkerArray      reliable, transient local, 1
 ``plan_info`` (out)       diagnostic_msgs/DiagnosticArray     reliable, transient local, 1
 ========================  ==================================  ==============================
 
-QoS and the reasons for it: :mod:`threat_planner.ros.interface`.
+QoS and the reasons for it: :mod:`threat_planner.ros.interface`; the airspace messages:
+:mod:`threat_planner.ros.conversions.airspace`, with parameter ``airspace_file`` and which
+input wins: :mod:`threat_planner.ros.airspace_input`.
 
 Every accepted input (a threat picture, start, goal or parameter change) gets the next
 input sequence number and triggers a replan. Planning runs in a worker thread so the
