@@ -243,6 +243,13 @@ def test_the_file_loads_and_the_topics_replace_its_parts(tmp_path):
     s = accept(s, 'parameters', {'airspace_file': file})
     assert [z.label for z in s.zones] == ['no_fly_zones[0]'] and s.terrain.clearance == 5
     assert accept(s, 'parameters', {'airspace_file': ''}).airspace is None
+    # A new frame drops what the topics sent in the old one, and keeps the file's.
+    s = accept(s, 'no_fly_zones', zone_msg(make_zone('sphere', 'nfz[3]', center=[20, 80, 50],
+                                                     radius=5)))
+    s = accept(s, 'terrain', img)
+    s = accept(s, 'parameters', {'frame_id': 'odom'})
+    assert [z.label for z in s.zones] == ['no_fly_zones[0]'] and s.terrain.clearance == 5
+    assert not s.terrain_from_topic
 
 
 @pytest.mark.parametrize('data, reason', [

@@ -210,3 +210,14 @@ def test_replay_of_the_recorded_airspace_run_reproduces_its_plans(node):
     replayed = [r for r in report.rows if r.replayed == 'OK']
     rejected = [r for r in report.rows if r.replayed == 'rejected']
     assert len(replayed) >= 6 and len(rejected) >= 3
+
+
+def test_a_node_started_with_a_bad_airspace_file_exits_with_the_reason(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(yaml.safe_dump({'no_fly_zones': [{'type': 'cylinder', 'center': [5, 5],
+                                                     'radius': 3, 'z_min': 10, 'z_max': 2}]}))
+    log = tmp_path / 'node.log'
+    proc = start_process(planner_command('/badair', {'airspace_file': str(bad)}), DOMAIN, log)
+    assert proc.wait(60) == 1
+    assert (f'cannot start: airspace_file {bad}: no_fly_zones[0].z_max: must exceed z_min '
+            '(10.0), got 2.0') in log.read_text()

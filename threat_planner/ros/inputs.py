@@ -160,7 +160,9 @@ def _accept(state: InputState, kind: str, msg) -> InputState:
         check_endpoints(start, goal, settings.box,
                         NO_THREATS if threats is None else threats)
         zones, terrain, from_topic = state.zones, state.terrain, state.terrain_from_topic
-        if 'airspace_file' in msg:
+        if 'airspace_file' in msg or settings.frame_id != s.frame_id:
+            # Zones and terrain received in the old frame are dropped like its threats;
+            # the file's are in frame_id, whichever it is.
             air = load_airspace_file(settings.airspace_file)
             zones, terrain, from_topic = air.zones, air.terrain, False
         elif from_topic and terrain is not None and set(_TERRAIN_GRID) & set(msg):
