@@ -11,6 +11,7 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
+from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import Image
 from visualization_msgs.msg import Marker, MarkerArray
 import yaml
@@ -297,6 +298,14 @@ def test_a_recorded_airspace_plan_replays_and_needs_its_airspace(tmp_path):
     assert [i.kind for i in bag.inputs] == ['start', 'goal_pose', 'no_fly_zones', 'terrain',
                                             'threats']
     assert bag.parameters['terrain_masking'] is True
+    # The airspace inputs decode with rosbags too (the file's own definitions).
+    with AnyReader([path]) as reader:
+        got = {c.topic: reader.deserialize(raw, c.msgtype)
+               for c, _, raw in reader.messages() if c.topic in ('/no_fly_zones', '/terrain')}
+    assert len(got['/no_fly_zones'].markers) == 1 + len(sc.airspace.zones)
+    heights = np.frombuffer(bytes(got['/terrain'].data), '<f4').reshape(
+        sc.airspace.terrain.heights.shape)
+    np.testing.assert_array_equal(heights, sc.airspace.terrain.heights.astype(np.float32))
     report = replay_bag(bag)
     assert report.ok, report
     assert report.rows[0].j_replayed == pytest.approx(result.cost.J, rel=1e-12)
