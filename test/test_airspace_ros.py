@@ -313,3 +313,16 @@ def test_a_recorded_airspace_plan_replays_and_needs_its_airspace(tmp_path):
     free = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
     assert abs(free.cost.J - result.cost.J) > 1e-3 * result.cost.J
     assert Airspace(sc.airspace.zones, sc.airspace.terrain).violations(free.path)
+
+
+@pytest.mark.parametrize('change, reason', [
+    ({'terrain_origin': [1.0]}, r'terrain_origin: expected \[x, y\], got 1 values'),
+    ({'terrain_origin': [0.0, math.inf]}, 'terrain_origin: not finite'),
+    ({'terrain_resolution': 0.0}, 'terrain_resolution: must be finite and > 0'),
+    ({'terrain_clearance': -1.0}, 'terrain_clearance: must be finite and >= 0'),
+    ({'terrain_masking': 1}, 'terrain_masking: must be true or false'),
+    ({'airspace_file': 3}, 'airspace_file: must be a string'),
+])
+def test_airspace_parameters_refuse_bad_values(change, reason):
+    with pytest.raises(InputError, match=reason):
+        state(**change)
