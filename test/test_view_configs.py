@@ -9,8 +9,7 @@ import yaml
 from threat_planner.ros.interface import INPUT_TOPICS, OUTPUT_TOPICS
 
 REPO = Path(__file__).resolve().parents[1]
-# Drawn by the airspace layer (no_fly_zones, MarkerArray); not yet in ros/interface.py.
-KNOWN = {'/' + t for t in {**INPUT_TOPICS, **OUTPUT_TOPICS}} | {'/no_fly_zones'}
+KNOWN = {'/' + t for t in {**INPUT_TOPICS, **OUTPUT_TOPICS}}
 SHOWN = {'/path', '/initial_path', '/network', '/no_fly_zones'}
 
 

@@ -13,6 +13,7 @@ from threat_planner.bag.reader import read_ros_messages, RecordedMessage, record
 from threat_planner.errors import InputError, RecordingError
 from threat_planner.ros.conversions import (path_from_msg, PLAN_STATUS_NAME, plan_info_values,
                                             stamp_to_ns)
+from threat_planner.ros.inputs import input_stamp
 from threat_planner.ros.interface import (INPUT_TOPICS, NODE_NAME, OUTPUT_TOPICS,
                                           PARAMETER_EVENT_TYPE, PARAMETER_EVENTS_TOPIC)
 from threat_planner.ros.parameters import PARAMETER_DEFAULTS
@@ -261,7 +262,7 @@ def load_bag(path, *, tolerant: bool = False) -> Bag:
                                        m.log_time_ns, stamp_to_ns(event.stamp), event))
         elif m.topic in kinds:
             inputs.append(BagInput(len(inputs) + 1, m.topic, kinds[m.topic], m.log_time_ns,
-                                   stamp_to_ns(m.msg.header.stamp), m.msg))
+                                   stamp_to_ns(input_stamp(m.msg)), m.msg))
     plans = []
     for m in by_topic.get(f'{ns}/plan_info', []):
         try:

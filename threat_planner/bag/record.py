@@ -3,7 +3,9 @@
 :func:`record_plan` plans a scenario without ROS and records it as a planner node with
 parameter ``record`` set would have: the full parameter set as a
 ``rcl_interfaces/msg/ParameterEvent`` on ``/parameter_events``, then the inputs
-``start``, ``goal_pose`` and ``threats`` (a float32 PointCloud2, which is what the plan
+``start``, ``goal_pose``, the scenario's airspace (``no_fly_zones`` as a MarkerArray and
+``terrain`` as a 32FC1 Image with its grid in the ``terrain_*`` parameters, each only when
+the scenario has it) and ``threats`` (a float32 PointCloud2, which is what the plan
 is computed from), then the outputs ``initial_path``, ``path``, ``network`` and
 ``plan_info``, with the node's topic names, types and QoS. Inputs become state and the
 plan becomes messages through the node's own code (:mod:`threat_planner.ros.inputs`,
@@ -27,7 +29,9 @@ from threat_planner.core.config import PlannerConfig
 from threat_planner.core.result import PlanResult
 from threat_planner.core.scenario import Scenario
 from threat_planner.errors import RecordingError
-from threat_planner.ros.conversions import ns_to_stamp, pointcloud2_from_threats, stamp_to_ns
+from threat_planner.ros.conversions import (image_from_terrain, ns_to_stamp,
+                                            pointcloud2_from_threats, stamp_to_ns,
+                                            zones_to_markers)
 from threat_planner.ros.inputs import accept, InputState
 from threat_planner.ros.interface import (INPUT_TOPICS, NODE_NAME, OUTPUT_TOPICS,
                                           PARAMETER_EVENT_TYPE, PARAMETER_EVENTS_QOS,
@@ -57,6 +61,12 @@ def _scenario_parameters(scenario: Scenario, config: PlannerConfig,
     values['goal'] = [float(v) for v in scenario.goal]
     values['frame_id'] = scenario.frame_id
     values['record'] = record
+    terrain = scenario.airspace.terrain
+    if terrain is not None:   # airspace (issue 12): the grid of the terrain Image
+        values['terrain_origin'] = [float(v) for v in terrain.origin]
+        values['terrain_resolution'] = float(terrain.resolution)
+        values['terrain_clearance'] = float(terrain.clearance)
+        values['terrain_masking'] = bool(terrain.masking)
     return values
 
 
@@ -131,6 +141,17 @@ def record_plan(scenario: Scenario, config: PlannerConfig, target, *,
             msg = _pose_msg(xyz, frame, time.time_ns())
             rec.write(f'/{topic}', msg, log_time_ns=stamp_to_ns(msg.header.stamp))
             state = accept(state, topic, msg)
+        air = scenario.airspace
+        airspace_msgs = []   # airspace (issue 12): as a node would receive it
+        if air.zones:
+            airspace_msgs.append(('no_fly_zones', zones_to_markers(
+                air.zones, frame, ns_to_stamp(time.time_ns()))))
+        if air.terrain is not None:
+            airspace_msgs.append(('terrain', image_from_terrain(
+                air.terrain, frame, ns_to_stamp(time.time_ns()))))
+        for topic, msg in airspace_msgs:
+            rec.write(f'/{topic}', msg, log_time_ns=time.time_ns())
+            state = accept(state, topic, msg)
         cloud_ns = time.time_ns()
         stamp = ns_to_stamp(cloud_ns)
         cloud = pointcloud2_from_threats(scenario.threats.positions,
@@ -138,10 +159,11 @@ def record_plan(scenario: Scenario, config: PlannerConfig, target, *,
         rec.write('/threats', cloud, log_time_ns=cloud_ns)
         state = accept(state, 'threats', cloud)
 
-        seq = 3  # the node's number of the threats input, after start and goal_pose
+        # the node's number of the threats input, after start, goal_pose and the airspace
+        seq = 3 + len(airspace_msgs)
         request = PlanRequest(seq=seq, source='/threats', stamp=stamp, received_ns=cloud_ns,
                               threats=state.threats, start=state.start, goal=state.goal,
-                              settings=state.settings)
+                              settings=state.settings, airspace=state.airspace)
 
         def write(phase: str, outcome: PlanOutcome) -> None:
             plans = int(phase == 'done')

@@ -336,7 +336,8 @@ def _replay_one(row: ReplayRow, rec: BagPlan, state_reason: Tuple[InputState, Op
         return
     else:
         try:
-            result = plan(state.threats, state.start, state.goal, state.settings.box, config)
+            result = plan(state.threats, state.start, state.goal, state.settings.box, config,
+                          airspace=state.airspace)
         except (InputError, PlanningError) as exc:
             row.replayed = 'failed'
             note = f'failed: {exc}'

@@ -13,7 +13,7 @@ from pathlib import Path
 import sys
 
 from threat_planner.cli.bag import add_bag_commands
-from threat_planner.errors import InputError, ThreatPlannerError
+from threat_planner.errors import ThreatPlannerError
 from threat_planner.cli.options import add_planner_options, config_from, overrides, ProgressBar
 from threat_planner.core.planner import plan
 from threat_planner.core.scenario import load_scenario
@@ -30,9 +30,6 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     cfg = config_from(args)
     progress = ProgressBar('sweep')
-    if args.record and scenario.airspace:
-        raise InputError(f'--record: {scenario.name} has no-fly zones or terrain, which '
-                         'recordings do not hold yet')
     if args.record:
         from threat_planner.bag.record import record_plan
         result, recording = record_plan(scenario, cfg, args.record, progress=progress)

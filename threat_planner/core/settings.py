@@ -245,6 +245,23 @@ SETTINGS: tuple[Setting, ...] = (
     Setting('max_plan_time_s', float, 60.0,
             'Longest time one plan may take; a longer one is stopped and reported as timed '
             'out in plan_info', unit='s', lo=0.0, hi=86400.0, lo_open=True, scope='node'),
+    # airspace (issue 12): the file's keys are the scenario's (no_fly_zones, terrain); the
+    # terrain_* settings describe the grid of a height map received on topic 'terrain'.
+    Setting('airspace_file', str, '',
+            "YAML file with no_fly_zones and terrain (the scenario keys), loaded at start-up "
+            "and on change; '' = none", scope='node'),
+    Setting('terrain_origin', list, [0.0, 0.0],
+            "World [x, y] of pixel (0, 0) of a height map on topic 'terrain'", unit='m',
+            length=2, scope='node'),
+    Setting('terrain_resolution', float, 10.0,
+            "Spacing of the pixels of a height map on topic 'terrain'", unit='m', lo=0.0,
+            hi=1.0e6, lo_open=True, scope='node'),
+    Setting('terrain_clearance', float, 0.0,
+            "Smallest height above a height map on topic 'terrain'", unit='m', lo=0.0,
+            hi=1.0e6, scope='node'),
+    Setting('terrain_masking', bool, False,
+            "Whether a height map on topic 'terrain' hides the UAV from radars",
+            scope='node'),
     Setting('record', str, '',
             "MCAP recording of inputs and outputs: a path ending in .mcap (one file) or a "
             "folder (one bag per run); '' = off", scope='node'),

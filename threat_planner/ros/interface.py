@@ -1,7 +1,8 @@
 """The node's interface: its name, topics, message types and QoS, declared once.
 
 A threat message is the whole threat picture (it replaces the previous one), so the threat
-inputs subscribe transient local like a map: a node started after a latched publisher still
+inputs (and the airspace inputs ``no_fly_zones`` and ``terrain``, also whole) subscribe
+transient local like a map: a node started after a latched publisher still
 gets the current picture, and a volatile threat publisher is reported by rclpy as
 incompatible QoS. Start and goal subscribe volatile so that RViz's pose tools (volatile
 publishers) work. Outputs are latched (RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1).
@@ -42,6 +43,9 @@ INPUT_TOPICS = {
     'threat_poses': ('geometry_msgs/msg/PoseArray', THREAT_INPUT),
     'start': ('geometry_msgs/msg/PoseStamped', POSE_INPUT),
     'goal_pose': ('geometry_msgs/msg/PoseStamped', POSE_INPUT),
+    # airspace (issue 12): latched state like the threat picture (ros/conversions/airspace.py)
+    'no_fly_zones': ('visualization_msgs/msg/MarkerArray', THREAT_INPUT),
+    'terrain': ('sensor_msgs/msg/Image', THREAT_INPUT),
 }
 #: The node's outputs: topic name (relative) -> (type, publisher QoS).
 OUTPUT_TOPICS = {

@@ -10,13 +10,17 @@ topic                     type                                QoS
 ``threat_poses`` (in)     geometry_msgs/PoseArray             reliable, transient local, 10
 ``start`` (in)            geometry_msgs/PoseStamped           reliable, volatile, 10
 ``goal_pose`` (in)        geometry_msgs/PoseStamped           reliable, volatile, 10
+``no_fly_zones`` (in)     visualization_msgs/MarkerArray      reliable, transient local, 10
+``terrain`` (in)          sensor_msgs/Image (32FC1)           reliable, transient local, 10
 ``initial_path`` (out)    nav_msgs/Path (Dijkstra path)       reliable, transient local, 1
 ``path`` (out)            nav_msgs/Path (final path)          reliable, transient local, 1
 ``network`` (out)         visualization_msgs/MarkerArray      reliable, transient local, 1
 ``plan_info`` (out)       diagnostic_msgs/DiagnosticArray     reliable, transient local, 1
 ========================  ==================================  ==============================
 
-QoS and the reasons for it: :mod:`threat_planner.ros.interface`.
+QoS and the reasons for it: :mod:`threat_planner.ros.interface`; the airspace messages:
+:mod:`threat_planner.ros.conversions.airspace`, with parameter ``airspace_file`` and which
+input wins: :mod:`threat_planner.ros.airspace_input`.
 
 Every accepted input (a threat picture, start, goal or parameter change) gets the next
 input sequence number and triggers a replan. Planning runs in a worker thread so the
@@ -53,13 +57,13 @@ from nav_msgs.msg import Path
 from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import PointCloud2
+from sensor_msgs.msg import Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
 from threat_planner.bag import McapRecorder
 from threat_planner.errors import InputError, RecordingError
 from threat_planner.ros.conversions import plan_info_msg
-from threat_planner.ros.inputs import accept, InputState
+from threat_planner.ros.inputs import accept, input_stamp, InputState
 from threat_planner.ros.interface import (INPUT_TOPICS, LATCHED, NODE_NAME, OUTPUT_TOPICS,
                                           PARAMETER_EVENT_TYPE, PARAMETER_EVENTS_QOS,
                                           PARAMETER_EVENTS_TOPIC, POSE_INPUT, THREAT_INPUT)
@@ -154,6 +158,12 @@ class ThreatPlannerNode(Node):
             'goal_pose': self.create_subscription(
                 PoseStamped, 'goal_pose', lambda m: self._receive('goal_pose', m),
                 POSE_INPUT),
+            # airspace (issue 12): whole zone sets and height maps, latched like threats
+            'no_fly_zones': self.create_subscription(
+                MarkerArray, 'no_fly_zones', lambda m: self._receive('no_fly_zones', m),
+                THREAT_INPUT),
+            'terrain': self.create_subscription(
+                Image, 'terrain', lambda m: self._receive('terrain', m), THREAT_INPUT),
         }
 
     def _log_ready(self) -> None:
@@ -299,12 +309,13 @@ class ThreatPlannerNode(Node):
         self._record(topic, msg)
         self._seq += 1
         self._received += 1
+        stamp = input_stamp(msg)  # airspace (issue 12): a MarkerArray has no header
         try:
             self._state = accept(self._state, kind, msg)
         except InputError as exc:
-            self._reject(topic, msg.header.stamp, str(exc))
+            self._reject(topic, stamp, str(exc))
             return
-        self._request_plan(topic, msg.header.stamp)
+        self._request_plan(topic, stamp)
 
     def _reject(self, source: str, stamp: Time, reason: str) -> None:
         self._rejected += 1
@@ -323,7 +334,8 @@ class ThreatPlannerNode(Node):
             return
         request = PlanRequest(seq=self._seq, source=source, stamp=stamp,
                               received_ns=self._now_ns(), threats=state.threats,
-                              start=state.start, goal=state.goal, settings=state.settings)
+                              start=state.start, goal=state.goal, settings=state.settings,
+                              airspace=state.airspace)  # airspace (issue 12)
         if self._worker.submit(request):
             self._skipped += 1
 

@@ -21,6 +21,7 @@ from nav_msgs.msg import Path
 from numpy.typing import NDArray
 from visualization_msgs.msg import MarkerArray
 
+from threat_planner.core.airspace import Airspace
 from threat_planner.core.cost import Cost
 from threat_planner.core.planner import plan
 from threat_planner.core.result import PlanResult
@@ -28,6 +29,7 @@ from threat_planner.core.threats import Box, ThreatField
 from threat_planner.errors import InputError, PlanningError
 from threat_planner.ros.conversions import (network_markers, path_to_msg, plan_info_msg,
                                             stamp_to_ns)
+from threat_planner.ros.conversions.markers import airspace_markers
 from threat_planner.ros.parameters import NodeSettings
 
 __all__ = ['PlanOutcome', 'PlanRequest', 'input_values', 'outcome_messages', 'plan_done_info',
@@ -47,6 +49,7 @@ class PlanRequest:
     start: NDArray
     goal: NDArray
     settings: NodeSettings
+    airspace: Optional[Airspace] = None
 
 
 @dataclass
@@ -110,7 +113,8 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
 
     try:
         result = plan(request.threats, request.start, request.goal, s.box, s.config,
-                      progress=progress, on_initial=None if early is None else on_initial)
+                      progress=progress, on_initial=None if early is None else on_initial,
+                      airspace=request.airspace)
         t1 = time.perf_counter()
         outcome.plan_ms = 1e3 * (t1 - t0)
         outcome.result = result
@@ -129,7 +133,7 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
     hand_over('paths', outcome)
     try:
         outcome.network = plan_markers(result, request.threats, s.box, s.frame_id,
-                                       request.stamp)
+                                       request.stamp, request.airspace)
     except Exception as exc:  # noqa: B902 - a drawing bug must not lose the plan
         outcome.network_error = f'{type(exc).__name__}: {exc}'
     outcome.messages_ms = 1e3 * (time.perf_counter() - t1)
@@ -260,8 +264,8 @@ def input_values(seq: int, source: str, stamp: Time, frame_id: str, received: in
 
 
 def plan_markers(result: PlanResult, threats: ThreatField, box: Box, frame_id: str,
-                 stamp: Time) -> MarkerArray:
-    """Draw a plan's threats, mesh, network and paths, sized to the flight box.
+                 stamp: Time, airspace: Optional[Airspace] = None) -> MarkerArray:
+    """Draw a plan's threats, mesh, network, paths and airspace, sized to the flight box.
 
     Parameters
     ----------
@@ -275,6 +279,8 @@ def plan_markers(result: PlanResult, threats: ThreatField, box: Box, frame_id: s
         Frame of the markers.
     stamp : builtin_interfaces.msg.Time
         Stamp of the markers (the input's).
+    airspace : Airspace, optional
+        Zones and terrain planned in; drawn in namespaces ``zones`` and ``terrain``.
 
     Returns
     -------
@@ -284,12 +290,15 @@ def plan_markers(result: PlanResult, threats: ThreatField, box: Box, frame_id: s
     """
     scale = box.diagonal / math.sqrt(3.0) / 100.0
     net = result.network
-    return network_markers(
+    markers = network_markers(
         threats.positions, threats.intensities,
         vertices=net.vertices, delaunay_edges=net.delaunay_edges(), nodes=net.nodes,
         network_edges=net.edges, initial_path=result.initial_path,
         path=result.path, frame_id=frame_id, stamp=stamp,
         threat_diameter=4.0 * scale, node_diameter=scale, line_width=0.2 * scale)
+    if airspace is not None:
+        markers.markers.extend(airspace_markers(airspace, frame_id, stamp, 0.2 * scale))
+    return markers
 
 
 def plan_done_info(values: Mapping[str, object], result: PlanResult, n_threats: int,
@@ -356,5 +365,9 @@ def _result_values(result: PlanResult, n_threats: int) -> dict[str, object]:
     }
     # Warm replanning is the core's (branch 'limits'); until PlanResult says, a plan is cold.
     values['start'] = 'warm' if getattr(result, 'warm', False) else 'cold'
+    if result.clearance is not None:   # airspace (issue 12): smallest margins [m]
+        c = result.clearance
+        values['clearance_zones_m'] = c.zones_m
+        values['clearance_terrain_m'] = c.terrain_m
     values.update(result.timings_ms)
     return values

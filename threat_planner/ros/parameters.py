@@ -8,7 +8,7 @@ Every parameter, its default, range, unit and help come from
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping
 
 import numpy as np
@@ -64,6 +64,14 @@ class NodeSettings:
         Longest time of one plan [s].
     record : str
         Recording target, '' for none.
+    airspace_file : str
+        Airspace YAML file, '' for none.
+    terrain_origin : NDArray
+        World (x, y) of pixel (0, 0) of a ``terrain`` height map (2,) [m].
+    terrain_resolution, terrain_clearance : float
+        Pixel spacing and smallest height above such a height map [m].
+    terrain_masking : bool
+        Whether such a height map masks the radars.
 
     """
 
@@ -76,6 +84,11 @@ class NodeSettings:
     max_threats: int
     max_plan_time_s: float
     record: str
+    airspace_file: str = ''
+    terrain_origin: NDArray = field(default_factory=lambda: np.zeros(2))
+    terrain_resolution: float = 10.0
+    terrain_clearance: float = 0.0
+    terrain_masking: bool = False
 
 
 def _numbers(name: str, value: object, count: int, what: str) -> NDArray:
@@ -127,13 +140,21 @@ def settings_from_parameters(values: Mapping[str, object]) -> NodeSettings:
             'bounds.max', 'bounds')) from None
     start = as_point('start', _numbers('start', values['start'], 3, '[x, y, z]'))
     goal = as_point('goal', _numbers('goal', values['goal'], 3, '[x, y, z]'))
-    for name in ('frame_id', 'default_intensity', 'max_threats', 'max_plan_time_s', 'record'):
+    for name in ('frame_id', 'default_intensity', 'max_threats', 'max_plan_time_s', 'record',
+                 'airspace_file', 'terrain_resolution', 'terrain_clearance',
+                 'terrain_masking'):
         NODE_SETTINGS[name].check(values[name])
+    origin = _numbers('terrain_origin', values['terrain_origin'], 2, '[x, y]')
     return NodeSettings(config=config, box=box, frame_id=values['frame_id'], start=start,
                         goal=goal, default_intensity=float(values['default_intensity']),
                         max_threats=int(values['max_threats']),
                         max_plan_time_s=float(values['max_plan_time_s']),
-                        record=values['record'].strip())
+                        record=values['record'].strip(),
+                        airspace_file=values['airspace_file'].strip(),
+                        terrain_origin=origin,
+                        terrain_resolution=float(values['terrain_resolution']),
+                        terrain_clearance=float(values['terrain_clearance']),
+                        terrain_masking=bool(values['terrain_masking']))
 
 
 def descriptor(name: str) -> ParameterDescriptor:

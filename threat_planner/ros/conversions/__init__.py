@@ -11,10 +11,13 @@ REP-103 (x forward, y left, z up; a positive pitch about y points the nose down)
 
 One module per message family: :mod:`._common` (stamps, headers, shared checks),
 :mod:`.cloud` (PointCloud2), :mod:`.poses` (PoseArray, PoseStamped), :mod:`.paths` (Path),
-:mod:`.markers` (MarkerArray), :mod:`.diagnostics` (DiagnosticArray).
+:mod:`.markers` (MarkerArray), :mod:`.diagnostics` (DiagnosticArray), :mod:`.airspace`
+(no-fly zones as MarkerArray, terrain as Image).
 """
 
 from threat_planner.ros.conversions._common import ns_to_stamp, stamp_to_ns
+from threat_planner.ros.conversions.airspace import (image_from_terrain, terrain_from_image,
+                                                     zones_from_markers, zones_to_markers)
 from threat_planner.ros.conversions.cloud import pointcloud2_from_threats, threats_from_pointcloud2
 from threat_planner.ros.conversions.diagnostics import (PLAN_STATUS_NAME, plan_info_msg,
                                                         plan_info_values)
@@ -25,6 +28,7 @@ from threat_planner.ros.conversions.poses import point_from_pose_stamped, threat
 __all__ = [
     'PLAN_STATUS_NAME',
     'SPHERES_PER_THREAT_MAX',
+    'image_from_terrain',
     'network_markers',
     'ns_to_stamp',
     'path_from_msg',
@@ -34,6 +38,9 @@ __all__ = [
     'point_from_pose_stamped',
     'pointcloud2_from_threats',
     'stamp_to_ns',
+    'terrain_from_image',
     'threats_from_pointcloud2',
     'threats_from_pose_array',
+    'zones_from_markers',
+    'zones_to_markers',
 ]

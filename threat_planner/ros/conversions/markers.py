@@ -10,6 +10,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from threat_planner.errors import InputError
+from threat_planner.ros.conversions.airspace import zones_to_markers
 from threat_planner.ros.conversions._common import (as_edges, as_points, check_finite_rows,
                                                     make_header)
 
@@ -175,3 +176,68 @@ def network_markers(
         markers.append(strip)
 
     return MarkerArray(markers=markers)
+
+
+#: The terrain is drawn on at most this many grid cells per side (subsampled beyond).
+TERRAIN_CELLS_MAX = 48
+
+
+def airspace_markers(airspace, frame_id: str, stamp: Time,
+                     line_width: float = 0.2) -> list[Marker]:
+    """Draw no-fly zones (namespace ``zones``) and terrain (``terrain``) for RViz.
+
+    Spheres, cylinders and boxes are SPHERE, CYLINDER and CUBE markers; a prism is a
+    LINE_LIST of its floor, ceiling and vertical edges; the terrain is a TRIANGLE_LIST
+    over at most :data:`TERRAIN_CELLS_MAX` cells per side (every k-th grid point).
+
+    Parameters
+    ----------
+    airspace : threat_planner.core.airspace.Airspace
+        Zones and terrain.
+    frame_id : str
+        Frame of the markers.
+    stamp : builtin_interfaces.msg.Time
+        Their stamp.
+    line_width : float, optional
+        Width of prism edges [m].
+
+    Returns
+    -------
+    list of Marker
+        The markers, to append to a MarkerArray after its DELETEALL.
+
+    """
+    header = make_header(frame_id, stamp)
+    out = []
+    solid = zones_to_markers(airspace.zones, frame_id, stamp, line_width).markers[1:]
+    for i, (zone, m) in enumerate(zip(airspace.zones, solid)):
+        m.ns, m.id = 'zones', i
+        m.text = zone.label
+        if zone.kind == 'prism':
+            ring = np.vstack([zone.polygon, zone.polygon[:1]])
+            lo = np.column_stack([ring, np.full(len(ring), zone.z_min)])
+            hi = np.column_stack([ring, np.full(len(ring), zone.z_max)])
+            segs = [np.stack([lo[:-1], lo[1:]], 1), np.stack([hi[:-1], hi[1:]], 1),
+                    np.stack([lo[:-1], hi[:-1]], 1)]
+            m.type = Marker.LINE_LIST
+            m.points = _to_point_msgs(np.concatenate(segs).reshape(-1, 3))
+            m.scale.y = m.scale.z = m.scale.x
+            m.color = _rgba(0.9, 0.1, 0.1, 0.9)
+        out.append(m)
+    t = airspace.terrain
+    if t is not None:
+        rows, cols = t.heights.shape
+        step = max(1, -(-max(rows, cols) // TERRAIN_CELLS_MAX))
+        r = np.unique(np.r_[np.arange(0, rows, step), rows - 1])
+        c = np.unique(np.r_[np.arange(0, cols, step), cols - 1])
+        xx, yy = np.meshgrid(t.origin[0] + c * t.resolution, t.origin[1] + r * t.resolution)
+        grid = np.dstack([xx, yy, t.heights[np.ix_(r, c)]])
+        a, b = grid[:-1, :-1], grid[:-1, 1:]
+        d, e = grid[1:, :-1], grid[1:, 1:]
+        tris = np.stack([a, b, e, a, e, d], axis=2).reshape(-1, 3)
+        surface = _marker('terrain', 0, Marker.TRIANGLE_LIST, header, 1.0,
+                          _rgba(0.55, 0.45, 0.3, 0.7))
+        surface.pose.orientation.w = 1.0
+        surface.points = _to_point_msgs(tris)
+        out.append(surface)
+    return out
