@@ -89,3 +89,18 @@ def test_npy_of_the_wrong_shape_is_refused(tmp_path):
     path = _split(tmp_path, np.ones((5, 3)), '.npy')
     with pytest.raises(ScenarioError, match=r'needs 4 numeric columns x y z F, got shape \[5'):
         load_scenario(path)
+
+
+def test_cli_plans_a_split_scenario_and_reports_a_missing_table_in_one_line(tmp_path):
+    import subprocess
+    import sys
+    inline = load_scenario(DATA / 'uniform20_0.yaml')
+    rows = np.column_stack([inline.threats.positions, inline.threats.intensities])
+    path = _split(tmp_path, rows, '.npy')
+    cmd = [sys.executable, '-m', 'threat_planner.cli', 'plan', str(path), '--method', 'paper']
+    ok = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert ok.returncode == 0 and 'threats=20' in ok.stdout
+    (tmp_path / 'threats.npy').unlink()
+    bad = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and bad.stderr.count('\n') == 1
+    assert 'threats_file: cannot read' in bad.stderr and 'Traceback' not in bad.stderr
