@@ -217,7 +217,9 @@ def render_markdown(bench: dict, speed_md: str | None) -> str:
         '# Benchmark', '',
         f"Generated {meta['date']} by `{meta['command']}` on {meta['machine']}, a machine "
         'shared with other engineers\' jobs: times are indicative, compare rows of this run '
-        'only.', '',
+        'only.' + (f" Ratios re-scored {meta['rescored']} against the yardsticks of that "
+                   'time (`--rescore`: same paths, more yardsticks).'
+                   if meta.get('rescored') else ''), '',
         '**Rules.** Every J is the library\'s exact closed-form `path_cost` of the row\'s '
         'final path. Every row\'s path is held inside the flight box (column "paths in the '
         'box" counts it, to 1e-6 of the diagonal). The primary yardstick is the **in-box '

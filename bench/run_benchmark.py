@@ -104,10 +104,7 @@ def run_case(sc, w: float, y: yd.Yardsticks, args, grid: bt.GridGraph | None) ->
     """Benchmark every row on one (scenario, w)."""
     limits = y.limits or yd.default_limits(sc)
     case = {'scenario': sc.name, 'w': w, 'n_threats': len(sc.threats),
-            'yardsticks': {'in_box': y.in_box, 'in_box_source': y.in_box_source,
-                           'box_check': y.box_check, 'limited': y.limited,
-                           'limits': limits.as_dict(), 'lower_bound': y.lower_bound},
-            'methods': {}}
+            'yardsticks': _yardstick_fields(sc, y), 'methods': {}}
     methods = case['methods']
     for label, fields in OURS.items():
         if label in args.skip:
@@ -136,6 +133,21 @@ def run_case(sc, w: float, y: yd.Yardsticks, args, grid: bt.GridGraph | None) ->
                 r.update(ms=1e3 * r['elapsed_s'], multiplier=mult,
                          capped=mult * base_s > args.ompl_cap)
                 methods[f'{OMPL_LABEL.get(planner, planner)}@{mult}x'] = r
+    score_case(case, sc, y)
+    return case
+
+
+def _yardstick_fields(sc, y: yd.Yardsticks) -> dict:
+    limits = y.limits or yd.default_limits(sc)
+    return {'in_box': y.in_box, 'in_box_source': y.in_box_source, 'box_check': y.box_check,
+            'limited': y.limited, 'limits': limits.as_dict(), 'lower_bound': y.lower_bound}
+
+
+def score_case(case: dict, sc, y: yd.Yardsticks) -> None:
+    """Set a case's yardsticks and every row's ratios, in-box flag and limit check."""
+    case['yardsticks'] = _yardstick_fields(sc, y)
+    limits = y.limits or yd.default_limits(sc)
+    methods = case['methods']
     for m in methods.values():
         _score(m, y, sc.box)
     if br.ON in methods:
@@ -145,7 +157,28 @@ def run_case(sc, w: float, y: yd.Yardsticks, args, grid: bt.GridGraph | None) ->
         m['achieved'] = flight_limits(pts)
         m['worst_violation'] = _violation(m['achieved'], limits)
         m['ratio_limited'] = m['J'] / y.limited if y.limited else math.nan
-    return case
+
+
+def rescore(out: Path) -> dict:
+    """Re-read the yardsticks and re-score the stored paths of ``benchmark.json``.
+
+    A limited yardstick computed after the run must have the limits the row was run with;
+    a case whose limits differ keeps no limited ratio.
+    """
+    bench = load_json(out / 'benchmark.json')
+    table = yd.YardstickTable()
+    for case in bench['cases']:
+        sc = load_scenario(bt.LOCAL_SCENARIOS / f"{case['scenario']}.yaml")
+        y = table.get(sc, case['w'])
+        ran = case['yardsticks']['limits']
+        if y.limits is not None and y.limits.as_dict() != ran:
+            y = yd.Yardsticks(y.in_box, y.in_box_source, y.box_check, None, Limits(
+                ran['max_climb_deg'], ran['max_dive_deg'], ran['min_turn_radius_m']),
+                y.lower_bound)
+        score_case(case, sc, y)
+    bench['meta']['rescored'] = dt.datetime.now().isoformat(timespec='seconds')
+    write_outputs(bench, out)
+    return bench
 
 
 def _violation(got: dict, limits: Limits) -> str:
@@ -207,7 +240,7 @@ def _unclean(obj):
         for k in ('J', 'J_ompl'):
             if k in out and out[k] is None:
                 out[k] = math.inf
-        for k in ('ratio', 'rel_diff'):
+        for k in ('ratio', 'rel_diff', 'ratio_limited'):
             if k in out and out[k] is None:
                 out[k] = math.nan
         return out
@@ -252,6 +285,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument('--skip', nargs='*', default=[], choices=list(OURS),
                    help='threat_planner variants to skip')
     p.add_argument('--seed', type=int, default=1, help='OMPL random seed')
+    p.add_argument('--rescore', action='store_true',
+                   help='only re-score benchmark.json against the current yardsticks')
     p.add_argument('--speed', action='store_true',
                    help='also plan scale1000/scale10000 with the limits on, read cli_scale.json')
     args = p.parse_args(argv)
@@ -270,6 +305,10 @@ def main(argv: list[str] | None = None) -> int:
     """Run the benchmark; return the exit status."""
     args = parse_args(argv)
     given = sys.argv[1:] if argv is None else argv
+    if args.rescore:
+        bench = rescore(args.out)
+        print_targets(br.evaluate_targets(bench['cases'], bench.get('speed')))
+        return 0
     bench = run_benchmark(args, ('python bench/run_benchmark.py ' + ' '.join(given)).strip())
     if args.speed:
         bench['speed'] = measure_speed(args)
