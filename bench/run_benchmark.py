@@ -176,6 +176,8 @@ def rescore(out: Path) -> dict:
                 ran['max_climb_deg'], ran['max_dive_deg'], ran['min_turn_radius_m']),
                 y.lower_bound)
         score_case(case, sc, y)
+    if 'speed' in bench:
+        bench['speed'].update(cli_speed())
     bench['meta']['rescored'] = dt.datetime.now().isoformat(timespec='seconds')
     write_outputs(bench, out)
     return bench
@@ -209,6 +211,13 @@ def measure_speed(args) -> dict:
         out[f'plan_{n}_ms_note'] = (f'scale{n}.yaml once, cold, limits {lim.max_climb_deg:g}/'
                                     f'{lim.max_dive_deg:g}/{lim.min_turn_radius_m:.0f}, '
                                     f'feasible={r.feasible}, J {r.cost.J:.1f}')
+    out.update(cli_speed())
+    return out
+
+
+def cli_speed() -> dict:
+    """The command-line target and peak memory from ``cli_scale.json`` (if present)."""
+    out: dict = {}
     cli = RESULTS / 'cli_scale.json'
     if cli.exists():
         data = json.loads(cli.read_text())
