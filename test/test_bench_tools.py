@@ -135,39 +135,48 @@ def test_ompl_planner_uses_our_motion_cost(scenario):
     assert runs[1]['J'] <= runs[0]['J'] + 1e-12
 
 
-def _case(name, w, n, js, ms=10.0, feasible=True):
-    methods = {k: {'J': j, 'ratio': j / 100.0, 'ms': ms, 'feasible': feasible,
+def _case(name, w, n, js, ms=10.0, limits_ok=True, limited=110.0):
+    """A benchmark case with in-box yardstick 100 and limited yardstick ``limited``."""
+    methods = {k: {'J': j, 'ratio': j / 100.0, 'ms': ms, 'in_box': True,
                    'timings_ms': {'total_ms': ms}} for k, j in js.items()}
     for k, m in methods.items():
         if '@' in k:
-            m.update(rel_diff=0.0, motion_calls=100)
-    return {'scenario': name, 'w': w, 'n_threats': n, 'reference': {'J': 100.0, 'seconds': 1.0},
-            'methods': methods}
+            m.update(rel_diff=0.0, motion_calls=100, budget_s=1.0, capped=False)
+    br = importlib.import_module('benchmark_report')
+    if br.ON in methods:
+        methods[br.ON].update(limits_ok=limits_ok, ratio_limited=methods[br.ON]['J'] / limited,
+                              worst_violation='' if limits_ok else 'max_climb_deg 31 vs 30')
+    return {'scenario': name, 'w': w, 'n_threats': n, 'methods': methods,
+            'yardsticks': {'in_box': 100.0, 'in_box_source': 'bench 41^3', 'box_check': 1.0,
+                           'limited': limited, 'lower_bound': 95.0,
+                           'limits': {'max_climb_deg': 30.0, 'max_dive_deg': 30.0,
+                                      'min_turn_radius_m': 10.0}}}
 
 
-def test_targets_use_like_for_like_variants():
+def test_targets_are_against_the_in_box_and_limited_yardsticks():
+    br = importlib.import_module('benchmark_report')
     rb = importlib.import_module('run_benchmark')
-    box, ref = rb.BOX_PEER, rb.REF_PEER
-    assert rb.OURS[box]['max_pitch_deg'] == 90 and rb.OURS[box]['max_turn_deg'] == 180
-    assert rb.OURS[ref]['confine_to_box'] is False and rb.OURS[ref]['max_turn_deg'] == 180
-    cases = [_case('a', 0.2, 20, {'best': 130.0, box: 110.0, ref: 100.5, 'RRT*@10x': 120.0},
-                   ms=15.0, feasible=False),
-             _case('b', 0.8, 20, {'best': 140.0, box: 125.0, ref: 103.0, 'RRT*@10x': 120.0},
-                   ms=25.0)]
-    scale = {'sizes': [{'n': 20, 'variant': 'best', 'wall_ms': 30.0,
-                        'timings_ms': {'total_ms': 25.0}, 'peak_rss_mb': 100.0},
-                       {'n': 20, 'variant': box, 'wall_ms': 12.0,
-                        'timings_ms': {'total_ms': 10.0}, 'peak_rss_mb': 100.0}],
-             'files': []}
-    rows = {r['target']: r for r in rb.evaluate_targets({'cases': cases}, scale)}
-    med = rows[f'{ref}: median J/ref <= {rb.RATIO_MEDIAN}']
-    assert med['value'] == pytest.approx(1.0175) and med['verdict'] == 'MISS'
-    assert rows[f'{ref}: worst J/ref <= {rb.RATIO_WORST}']['verdict'] == 'PASS'
-    rrt = rows[f'{box} J < RRT*@10x J on every case']
-    assert rrt['verdict'] == 'MISS' and rrt['value'] == pytest.approx(125.0 / 120.0)
-    assert rows['best: path meets its angle limits on every case']['value'] == 1
-    assert rows['best: 20 threats total <= 20 ms (sweep)']['verdict'] == 'MISS'
-    assert rows[f'{box}: 20 threats total <= 20 ms (sweep)']['verdict'] == 'PASS'
-    assert rows[f'{box}: ~20 threats total <= 20 ms (worst benchmark case)']['value'] == 25.0
-    summary = rb.summary_table(cases)
-    assert f'| {ref} | no | none |' in summary and f'| {box} | yes | none |' in summary
+    assert rb.OURS[br.OFF]['max_climb_deg'] == 90 and rb.OURS[br.OFF]['min_turn_radius_m'] == 0
+    cases = [_case('a', 0.2, 20, {br.OFF: 100.1, br.ON: 111.0, 'RRT*@10x': 120.0}, ms=12.0),
+             _case('b', 0.8, 20, {br.OFF: 103.0, br.ON: 110.0, 'RRT*@10x': 101.0}, ms=50.0,
+                   limits_ok=False)]
+    rows = {r['target']: r for r in br.evaluate_targets(cases, {'cli_ratio': 9.0,
+                                                                'cli_ratio_note': 'x'})}
+    med = rows[f'{br.OFF}: median J / in-box yardstick <= {br.MEDIAN_IN_BOX}']
+    assert med['value'] == pytest.approx(1.0155) and med['verdict'] == 'MISS'
+    worst = rows[f'{br.OFF}: worst J / in-box yardstick <= {br.WORST_IN_BOX}']
+    assert worst['value'] == pytest.approx(1.03) and 'b@0.8' in worst['note']
+    assert rows[f'{br.ON}: feasible (in the box, within the limits) on every case'][
+        'value'] == 1
+    lim = rows[f'{br.ON}: worst J / limited yardstick <= {br.WORST_LIMITED}']
+    assert lim['value'] == pytest.approx(111.0 / 110.0) and lim['verdict'] == 'PASS'
+    assert rows[f'{br.ON}: ~20 threats worst <= 40 ms']['verdict'] == 'MISS'
+    assert rows[f'{br.ON}: ~20 threats median <= 15 ms']['value'] == pytest.approx(31.0)
+    assert rows[f'{br.OFF} J < RRT*@10x J on every case']['verdict'] == 'MISS'
+    assert rows['threat-planner plan, 10,000-threat YAML <= 8x bare Delaunay'][
+        'verdict'] == 'MISS'
+    assert rows[f'{br.ON}: 10,000 threats plan() <= 1.5 s']['verdict'] == 'n/a'
+    summary = br.summary_table(cases)
+    assert f'| {br.OFF} | yes | none | 2 |' in summary
+    assert '| lower bound `reference.json` (leaves the box) | no | none | 2 | 0.9500' in summary
+    assert 'NO (max_climb_deg 31 vs 30)' in br.cases_table(cases)
