@@ -158,8 +158,8 @@ class LimitTerm:
                      float(limits.min_turn_radius_m), limits.climb_on, limits.dive_on,
                      limits.radius_on and vertices >= 3)
         n = vertices - 1
-        self.rows = (limits.climb_on + limits.dive_on) * n + (max(n - 1, 0)
-                                                             if self.args[5] else 0)
+        radius_rows = max(n - 1, 0) if self.args[5] else 0
+        self.rows = (limits.climb_on + limits.dive_on) * n + radius_rows
         self._g = np.zeros(self.rows)
         self._grad = np.zeros((vertices, 3))
 

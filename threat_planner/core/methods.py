@@ -45,6 +45,8 @@ OPTIMISER_DENSE_PAIRS = 20_000
 OPTIMISER_CUTOFF_SPACINGS = 3.0
 #: Screened basins refined, best first, until one meets the flight limits ('best').
 FEASIBILITY_TRIES = 3
+#: Bisection steps of the last-resort repair towards the straight line.
+REPAIR_BISECTIONS = 20
 
 
 class Clock:
@@ -115,6 +117,8 @@ class Candidate:
     limit_check: Optional[LimitCheck] = None
     #: Relative J gap between the best and the second-best screened basin ('best').
     basin_margin: float = float('inf')
+    #: The flight limits bound in the final minimisation ('best').
+    limits_bound: bool = False
 
 
 def _smooth_route(p: Problem, seq: list[int], k: float) -> Candidate:
@@ -266,18 +270,54 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     # chance (a feasible path beats any infeasible one, then lower J wins).
     for _, name, seq, coarse in screened[:FEASIBILITY_TRIES]:
         cand = refine(p, resample(coarse, cfg.n_points), seq or routes[0], name)
-        cand.basin_margin = margin
+        # The screening is limit-free: where the limits bind, another basin may be the
+        # better one under them, so the lead says nothing and a warm start is refused.
+        cand.basin_margin = 0.0 if cand.limits_bound else margin
         if best is None or ((cand.limit_check.feasible, -cand.cost.J)
                             > (best.limit_check.feasible, -best.cost.J)):
             best = cand
         if best.limit_check.feasible:
             break
+    if not best.limit_check.feasible:
+        best = repair(p, best)
     p.clock.lap('optimisation_ms')
     return best
 
 
+def repair(p: Problem, cand: Candidate) -> Candidate:
+    """The feasible path nearest an infeasible candidate on its way to the straight line.
+
+    The last resort of "a feasible path beats any infeasible one": the straight line
+    meets every limit when its own climb does (no turn, one slope, in the box), and the
+    blend line + a (path - line) does for a small enough a; bisection finds the largest
+    feasible a. When the line itself breaks a limit (the goal is too steep above the
+    start) the candidate is returned as it is, reported infeasible with its violation.
+    """
+    n = len(cand.final) - 1
+    line = resample(np.vstack([p.s, p.t]), n)
+    if not p.check(line).feasible:
+        return cand
+    # The path at the line's parameter: equal arc-length steps on both.
+    path = resample(cand.final, n)
+    lo, hi = 0.0, 1.0
+    for _ in range(REPAIR_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        if p.check(line + mid * (path - line)).feasible:
+            lo = mid
+        else:
+            hi = mid
+    pts = line + lo * (path - line)
+    cost = p.cost(pts)
+    cfg = p.config
+    return Candidate(seq=cand.seq, initial=cand.initial, smoothed=None, smoothed_cost=None,
+                     final=pts, k=float('nan'), steps=0, converged=True, cost=cost,
+                     angles=check_angles(pts, cfg.max_pitch_deg, cfg.max_turn_deg),
+                     seed=f'{cand.seed}, repaired ({lo:.3g} of the way from the line)',
+                     limit_check=p.check(pts), basin_margin=cand.basin_margin)
+
+
 def refine(p: Problem, start: NDArray, seq: list[int], name: str,
-           tolerance: float = 1e-6) -> Candidate:
+           tolerance: float = 1e-6, warm: bool = False) -> Candidate:
     """Minimise J from a path of n_points segments inside the box and the flight limits.
 
     Parameters
@@ -292,6 +332,8 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
         Seed name reported in PlanResult.seed.
     tolerance : float
         Relative J decrease per iteration below which L-BFGS-B stops.
+    warm : bool
+        The start is a previous plan: straight to the constrained rounds if it is feasible.
 
     Returns
     -------
@@ -300,14 +342,15 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
     """
     cfg = p.config
     opt = minimise_cost(start, p.threats, cfg.w, p.box if cfg.confine_to_box else None,
-                        p.limits, tolerance=tolerance,
+                        p.limits, tolerance=tolerance, constrained_only=warm,
                         cutoff=_optimiser_cutoff(cfg.n_points, p.threats,
                                                  p.threats.typical_spacing(p.box)))
     return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
                      smoothed=None, smoothed_cost=None, final=opt.points, k=float('nan'),
                      steps=0, converged=True, cost=p.cost(opt.points),
                      angles=check_angles(opt.points, cfg.max_pitch_deg, cfg.max_turn_deg),
-                     seed=name, limit_check=p.check(opt.points))
+                     seed=name, limit_check=p.check(opt.points),
+                     limits_bound=opt.constrained)
 
 
 #: Method name -> the function that solves a Problem with it.

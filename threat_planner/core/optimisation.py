@@ -61,6 +61,8 @@ class OptimisationResult:
         Cost-and-gradient evaluations.
     rounds : int
         L-BFGS-B runs: 1 without binding limits, more for the augmented Lagrangian.
+    constrained : bool
+        The flight limits bound: the augmented Lagrangian ran.
 
     """
 
@@ -68,12 +70,14 @@ class OptimisationResult:
     iterations: int
     evaluations: int
     rounds: int
+    constrained: bool = False
 
 
 def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | None,
                   limits: FlightLimits | None = None, cutoff: float | None = None,
                   max_iterations: int = 1000, tolerance: float = 1e-6,
-                  constrained_iterations: int = 200) -> OptimisationResult:
+                  constrained_iterations: int = 200,
+                  constrained_only: bool = False) -> OptimisationResult:
     """Minimise J over the interior vertices within the box and the flight limits.
 
     Parameters
@@ -99,6 +103,9 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         convergence takes.
     constrained_iterations : int
         L-BFGS-B iteration limit of each augmented Lagrangian round.
+    constrained_only : bool
+        Skip the box-only run when the start meets the limits (a warm start near the
+        constrained optimum: the box-only run would leave it and the rounds come back).
 
     Returns
     -------
@@ -167,7 +174,9 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     # With a cut-off the near threats are those of the path where they were picked; a path
     # that has moved far since may have flown towards threats it does not see, so re-pick
     # and continue until it stays within a quarter of the cut-off of the last pick.
-    for _ in range(MAX_PAIR_ROUNDS if cutoff is not None else 1):
+    skip = (constrained_only and limits.any_constraint
+            and check_limits(x, limits, floor).feasible)
+    for _ in range(0 if skip else MAX_PAIR_ROUNDS if cutoff is not None else 1):
         pick_pairs(x)
         state['scale'] = None
         z, nit, nfev = run(objective, x[1:-1].reshape(-1), max_iterations)
@@ -177,12 +186,13 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         x = moved
         if cutoff is None or shift < 0.25 * cutoff:
             break
-    if not limits.any_constraint or check_limits(x, limits, floor).feasible:
+    if not skip and (not limits.any_constraint or check_limits(x, limits, floor).feasible):
         return OptimisationResult(x, iterations, evaluations, rounds)
 
     # Equal spacing first: the constraint gradients grow as 1 / segment length, and the
     # unconstrained optimum bunches vertices at its corners.
-    x = resample(x, n - 1)
+    if not skip:
+        x = resample(x, n - 1)
     pick_pairs(x)
     state['even'] = EVEN_SPACING_WEIGHT * spring_unit
     aim = limits.tightened(ANGLE_MARGIN_DEG, RADIUS_MARGIN)
@@ -198,7 +208,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         val, grad_c = term.penalty(full(z), lam, mu)
         return f + val, g + grad_c[1:-1].reshape(-1)
 
-    best = None
+    best = (objective(x[1:-1].reshape(-1))[0], x) if skip else None
     for _ in range(MAX_OUTER):
         z, nit, nfev = run(lagrangian, x[1:-1].reshape(-1), constrained_iterations)
         iterations, evaluations, rounds = iterations + nit, evaluations + nfev, rounds + 1
@@ -216,6 +226,6 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
             mu *= PENALTY_GROWTH
         prev_violation, prev_f = violation, f
     if best is not None:
-        return OptimisationResult(best[1], iterations, evaluations, rounds)
+        return OptimisationResult(best[1], iterations, evaluations, rounds, True)
     # Stalled short of feasibility: the caller repairs (methods.repair) or reports.
-    return OptimisationResult(x, iterations, evaluations, rounds)
+    return OptimisationResult(x, iterations, evaluations, rounds, True)
