@@ -285,7 +285,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
 
 
 def repair(p: Problem, cand: Candidate) -> Candidate:
-    """The feasible path nearest an infeasible candidate on its way to the straight line.
+    """Return the feasible path nearest an infeasible candidate on its way to the line.
 
     The last resort of "a feasible path beats any infeasible one": the straight line
     meets every limit when its own climb does (no turn, one slope, in the box), and the

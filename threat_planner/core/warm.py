@@ -10,8 +10,8 @@ refined under the limits. Rule that guards "no worse than a cold plan": the warm
 refused (cold plan) when the previous screening's best basin led the second by less than
 WARM_BASIN_MARGIN in J (a 1 % move could swap them) or when the flight limits bound in
 its final minimisation (the screening is limit-free, so under binding limits another basin
-may be better: measured on uniform20_0 at w = 0.5, warm 0.07 % above cold), and the warm result is dropped for a
-cold plan when it breaks a limit the previous plan met.
+may be better: measured on uniform20_0 at w = 0.5, warm 0.07 % above cold), and the warm
+result is dropped for a cold plan when it breaks a limit the previous plan met.
 """
 
 from __future__ import annotations
