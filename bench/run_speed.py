@@ -158,9 +158,12 @@ def write_markdown(cold: list[dict], scale: list[dict], quality: list[dict]) -> 
     if warm_off:
         lines.append(f'* warm replan at 20 threats, limits off: accepted {len(warm_off)} of '
                      f'{len(off)}, median {statistics.median(warm_off):.0f} ms')
-    worse = [r for r in cold if r['warm'] and r['warm_J'] > r['recold_J'] * (1 + 1e-6)]
-    lines.append(f'* warm J <= cold J of the same problem: {len(worse)} exceptions'
-                 + (': ' + ', '.join(f'{r["case"]} {r["limits"]}' for r in worse)
+    excess = [(r['warm_J'] / r['recold_J'] - 1.0, r) for r in cold if r['warm']]
+    worse = [(e, r) for e, r in excess if e > 1e-6]
+    lines.append(f'* warm J <= cold J of the same problem (1e-6 relative): {len(worse)} of '
+                 f'{len(excess)} warm plans above'
+                 + (', by at most ' + f'{max(e for e, _ in worse):.1e} relative ('
+                    + ', '.join(f'{r["case"]} {r["limits"]}' for _, r in worse) + ')'
                     if worse else ''))
     lines.append(f'* limits on, feasible: {sum(r["feasible"] for r in on)} of {len(on)}')
     if quality:

@@ -306,6 +306,7 @@ def _slope_screening(p: Problem, screened: list, bounds: Box | None,
     slopes = FlightLimits(lim.max_climb_deg, lim.max_dive_deg, 0.0, lim.min_altitude_m)
     floor = float(p.box.lo[2])
     held = []
+    # Every seed: re-screening only the best 4 lost 10 % J on uniform20_1 at w = 0.8.
     for _, name, seq, coarse in screened:
         path = minimise_cost(resample(coarse, COARSE_SEGMENTS), p.threats, p.config.w,
                              bounds, slopes, cutoff=cutoff,
