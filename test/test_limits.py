@@ -9,6 +9,7 @@ import pytest
 from threat_planner.core.limits import (check_limits, climb_angles, constraint_jacobian,
                                         constraint_values, constraint_vjp, FlightLimits,
                                         turn_radii)
+from threat_planner.core.limit_kernels import LimitTerm
 
 ALL_ON = FlightLimits(20.0, 30.0, 15.0, 0.0)
 
@@ -111,3 +112,29 @@ def test_constraints_agree_with_the_metrics(seed, n):
     np.testing.assert_array_equal(g[n:2 * n] >= 0, -ang <= 30.0 + 1e-9)
     close = np.abs(rad - 15.0) < 1e-9
     np.testing.assert_array_equal((g[2 * n:] >= 0)[~close], (rad >= 15.0)[~close])
+
+
+@given(st.integers(0, 10_000), st.integers(2, 30), st.floats(0.1, 100.0))
+@settings(max_examples=40, deadline=None)
+def test_compiled_penalty_is_the_phr_term_of_the_numpy_constraints(seed, n, mu):
+    """LimitTerm: the same g, and value and gradient of sum(s^2 - lam^2) / (2 mu)."""
+    pts = _random_path(seed, n)
+    lam = np.random.default_rng(seed).uniform(0.0, 2.0, len(constraint_values(pts, ALL_ON)))
+    term = LimitTerm(ALL_ON, len(pts))
+    g = constraint_values(pts, ALL_ON)
+    np.testing.assert_allclose(term.values(pts), g, rtol=1e-12, atol=1e-12)
+    s = np.maximum(0.0, lam - mu * g)
+    value, grad = term.penalty(pts, lam, mu)
+    assert value == pytest.approx((s @ s - lam @ lam) / (2.0 * mu), rel=1e-10, abs=1e-12)
+    np.testing.assert_allclose(grad, -constraint_vjp(pts, ALL_ON, s)[1], rtol=1e-9,
+                               atol=1e-9 * max(1.0, float(np.abs(grad).max())))
+
+
+def test_a_vertical_segment_is_not_a_stationary_point_of_the_climb_constraint():
+    """Straight up breaks a 20 deg climb limit; g must still point the way out."""
+    pts = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 10.0], [10.0, 10.0, 10.0]])
+    jac = constraint_jacobian(pts, FlightLimits(20.0, 90.0, 0.0, 0.0))
+    assert constraint_values(pts, FlightLimits(20.0, 90.0, 0.0, 0.0))[0] < 0
+    # Moving the top vertex horizontally (towards the goal) raises g: sin(20 deg) / 10 m.
+    slope = jac[0, 1, :2] @ np.array([1.0, 1.0]) / math.sqrt(2.0)
+    assert slope == pytest.approx(math.sin(math.radians(20.0)) / 10.0)

@@ -5,9 +5,13 @@ import json
 import numpy as np
 import pytest
 
+from threat_planner.core.config import PlannerConfig as Config
 from threat_planner.core.limits import check_limits, FlightLimits
+from threat_planner.core.methods import Candidate, Clock, Problem, repair
 from threat_planner.core.planner import plan, PlannerConfig
 from threat_planner.core.scenario import load_scenario
+from threat_planner.core.settings import PHYSICAL_LIMITS
+from threat_planner.core.smoothing import check_angles
 from threat_planner.core.threats import Box, ThreatField
 from threat_planner.errors import InputError
 
@@ -28,6 +32,60 @@ def test_plans_at_any_resolution_meet_the_same_limits(n_points):
     assert summary['limits']['min_turn_radius_m'] == 15.0
     assert summary['path_limits']['climb_deg'] == pytest.approx(check.climb_deg)
     assert summary['feasible'] is True and summary['worst_violation'] is None
+
+
+BUNDLED = ['uniform20_0', 'uniform20_1', 'weak20_0', 'strongweak_0', 'clustered_0',
+           'ground_0', 'coplanar_0']
+
+
+def test_the_limits_are_on_by_default_and_are_the_yardsticks():
+    cfg = PlannerConfig()
+    assert FlightLimits.of(cfg).as_dict() == {**PHYSICAL_LIMITS, 'min_altitude_m': 0.0}
+    assert FlightLimits.of(cfg).any_constraint
+
+
+@pytest.mark.parametrize('name', BUNDLED)
+def test_default_plans_on_every_bundled_scenario_are_feasible(name):
+    sc = load_scenario(DATA + f'{name}.yaml')
+    for w in (0.2, 0.8):
+        r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=w))
+        check = check_limits(r.path, FlightLimits(**PHYSICAL_LIMITS), float(sc.box.lo[2]))
+        assert r.feasible and check.feasible, (w, check.violations)
+        assert np.all(r.path >= sc.box.lo - 1e-9) and np.all(r.path <= sc.box.hi + 1e-9)
+
+
+@pytest.mark.parametrize('n_points', [20, 80])
+def test_default_limits_hold_at_any_resolution_where_they_bind(n_points):
+    """uniform20_0 at w = 0.5: the limit-free optimum breaks the limits; both fixes hold."""
+    sc = load_scenario(DATA + 'uniform20_0.yaml')
+    r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.5, n_points=n_points))
+    check = check_limits(r.path, FlightLimits(**PHYSICAL_LIMITS), 0.0)
+    assert len(r.path) == n_points + 1 and check.feasible
+    assert check.min_turn_radius_m >= 10.0 * (1 - 1e-6)
+    assert max(check.climb_deg, check.dive_deg) <= 30.0 + 1e-6
+
+
+def test_repair_blends_towards_the_line_until_every_limit_holds():
+    """An infeasible zig-zag comes back as the feasible blend nearest it, J exact."""
+    sc = load_scenario(DATA + 'weak20_0.yaml')
+    cfg = Config(w=0.5, n_points=20)
+    p = Problem(threats=sc.threats, s=sc.start, t=sc.goal, box=sc.box, config=cfg,
+                network=None, edge_j=None, clock=Clock())
+    line = np.linspace(sc.start, sc.goal, 21)
+    inner = (np.arange(21) % 20 > 0)[:, None]
+    zig = line + np.outer((-1.0) ** np.arange(21), [0.0, 0.0, 8.0]) * inner
+    zig = sc.box.clip(zig)
+    bad = Candidate(seq=[], initial=zig, smoothed=None, smoothed_cost=None, final=zig,
+                    k=float('nan'), steps=0, converged=True, cost=p.cost(zig),
+                    angles=check_angles(zig, 90.0, 180.0), limit_check=p.check(zig))
+    assert not bad.limit_check.feasible
+    fixed = repair(p, bad)
+    assert fixed.limit_check.feasible and check_limits(fixed.final, p.limits, 0.0).feasible
+    assert fixed.cost.J == p.cost(fixed.final).J
+    # The largest feasible blend: a little further towards the zig-zag breaks a limit.
+    a = float(fixed.seed.split('(')[1].split()[0])
+    assert 0.0 < a < 1.0
+    assert not p.check(line + min(1.0, a * 1.01 + 1e-3) * (zig - line)).feasible
 
 
 def test_impossible_climb_is_reported_infeasible_with_the_violation():

@@ -10,6 +10,7 @@ from threat_planner.core.cost import path_cost
 from threat_planner.errors import InputError
 from threat_planner.core.planner import K_SWEEP, plan, PlannerConfig
 from threat_planner.core.scenario import load_scenario
+from threat_planner.core.settings import NO_LIMITS
 from threat_planner.core.threats import Box, ThreatField
 
 DATA = Path(__file__).parent / 'data'
@@ -66,8 +67,8 @@ def test_best_beats_the_paper_method(uniform):
         assert best.feasible
         if paper.feasible:
             assert best.cost.J < paper.cost.J
-        # Under the same (no) angle limits, best wins outright.
-        free = dict(max_pitch_deg=90.0, max_turn_deg=180.0)
+        # Under the same (no) limits, best wins outright.
+        free = dict(max_pitch_deg=90.0, max_turn_deg=180.0, **NO_LIMITS)
         best_free = plan(uniform.threats, uniform.start, uniform.goal, uniform.box,
                          PlannerConfig(w=w, **free))
         paper_free = plan(uniform.threats, uniform.start, uniform.goal, uniform.box,
@@ -78,9 +79,10 @@ def test_best_beats_the_paper_method(uniform):
 @pytest.mark.parametrize('name,w', [('uniform20_1', 0.5), ('weak20_0', 0.8),
                                     ('ground_0', 0.2), ('strongweak_0', 0.5)])
 def test_best_is_within_one_percent_of_the_yardstick(name, w):
-    # The yardstick's final L-BFGS was unbounded and had no angle limits; give ours the same.
+    # The yardstick's final L-BFGS was unbounded and had no flight limits; give ours the same.
     sc = load_scenario(DATA / f'{name}.yaml')
-    cfg = PlannerConfig(w=w, confine_to_box=False, max_pitch_deg=90.0, max_turn_deg=180.0)
+    cfg = PlannerConfig(w=w, confine_to_box=False, max_pitch_deg=90.0, max_turn_deg=180.0,
+                        **NO_LIMITS)
     r = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
     assert r.cost.J / REFERENCE[f'{name}@{w}']['J'] < 1.01
 

@@ -16,7 +16,7 @@ pitch and turn angles (:func:`~threat_planner.core.smoothing.check_angles`, meth
 segments over a 100 m field and ~1.3 m at 80.
 
 The optimiser sees the limits as smooth constraints g >= 0 (dimensionless, O(1)):
-climb ``sin(c) - dz/|d|``, dive ``sin(v) + dz/|d|``, radius ``1 - R_min / R`` written
+climb ``sin(c - angle)``, dive ``sin(v + angle)``, radius ``1 - R_min / R`` written
 as ``1 - 2 R_min sqrt(|a x b|^2 / (|a|^2 |b|^2 |a + b|^2))`` (curvature, no division by a
 vanishing cross product); the minimum altitude is a bound.
 """
@@ -228,19 +228,29 @@ def _blocks(points: NDArray, limits: FlightLimits
     n = len(d)
     ln = np.sqrt(np.einsum('ik,ik->i', d, d))
     safe = np.where(ln > 0, ln, 1.0)
-    q = d[:, 2] / safe
-    # dq/dd = e_z / |d| - dz d / |d|^3
-    dq = -(q / safe)[:, None] * d / safe[:, None]
-    dq[:, 2] += 1.0 / safe
+    h = np.hypot(d[:, 0], d[:, 1])
+    # dh/dd; a vertical segment has no horizontal direction, so take the start-goal one
+    # (any horizontal unit vector is a subgradient; a zero one would be a false optimum).
+    axis = p[-1, :2] - p[0, :2]
+    axis = axis / np.linalg.norm(axis) if np.linalg.norm(axis) > 0 else np.array([1.0, 0.0])
+    dh = np.zeros_like(d)
+    flat = h > 0
+    dh[flat, :2] = d[flat, :2] / h[flat, None]
+    dh[~flat, :2] = axis
     seg_vertices = np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)
     values, blocks, row = [], [], 0
     for on, limit, sign in ((limits.climb_on, limits.max_climb_deg, -1.0),
                             (limits.dive_on, limits.max_dive_deg, 1.0)):
         if not on:
             continue
-        values.append(math.sin(math.radians(limit)) + sign * q)
-        blocks.append((np.arange(row, row + n), seg_vertices,
-                       np.stack([-sign * dq, sign * dq], axis=1)))
+        # g = sin(limit -+ angle) = (h sin(limit) -+ dz cos(limit)) / |d|: its slope
+        # does not vanish at a vertical segment, as sin(limit) -+ dz / |d| would.
+        sn, cs = math.sin(math.radians(limit)), math.cos(math.radians(limit))
+        gv = (h * sn + sign * d[:, 2] * cs) / safe
+        dg = sn * dh / safe[:, None] - (gv / safe)[:, None] * d / safe[:, None]
+        dg[:, 2] += sign * cs / safe
+        values.append(gv)
+        blocks.append((np.arange(row, row + n), seg_vertices, np.stack([-dg, dg], axis=1)))
         row += n
     if limits.radius_on and n >= 2:
         a, b = d[:-1], d[1:]

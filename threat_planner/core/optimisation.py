@@ -20,14 +20,19 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from threat_planner.core.kernels import cost_gradient
-from threat_planner.core.limits import (check_limits, constraint_jacobian, constraint_values,
-                                        constraint_vjp, FlightLimits)
+from threat_planner.core.limit_kernels import LimitTerm
+from threat_planner.core.limits import check_limits, FlightLimits
+from threat_planner.core.smoothing import resample
 from threat_planner.core.threats import Box, ThreatField
 
 __all__ = ['OptimisationResult', 'minimise_cost']
 
 #: Weight of the even-spacing term relative to the length cost.
 SPACING_WEIGHT = 1e-3
+#: Weight of the even-spacing (length variance) term under the flight limits, where
+#: bunched vertices make the constraints stiff (their gradients grow as 1 / length) and
+#: the penalty would otherwise fold the path into near-zero segments.
+EVEN_SPACING_WEIGHT = 1.0
 #: Most pair re-picks of a cut-off minimisation.
 MAX_PAIR_ROUNDS = 6
 #: The optimiser aims this far inside the angle limits [deg] ...
@@ -56,6 +61,8 @@ class OptimisationResult:
         Cost-and-gradient evaluations.
     rounds : int
         L-BFGS-B runs: 1 without binding limits, more for the augmented Lagrangian.
+    constrained : bool
+        The flight limits bound: the augmented Lagrangian ran.
 
     """
 
@@ -63,12 +70,14 @@ class OptimisationResult:
     iterations: int
     evaluations: int
     rounds: int
+    constrained: bool = False
 
 
 def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | None,
                   limits: FlightLimits | None = None, cutoff: float | None = None,
                   max_iterations: int = 1000, tolerance: float = 1e-6,
-                  constrained_iterations: int = 200) -> OptimisationResult:
+                  constrained_iterations: int = 200,
+                  constrained_only: bool = False) -> OptimisationResult:
     """Minimise J over the interior vertices within the box and the flight limits.
 
     Parameters
@@ -94,6 +103,9 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         convergence takes.
     constrained_iterations : int
         L-BFGS-B iteration limit of each augmented Lagrangian round.
+    constrained_only : bool
+        Skip the box-only run when the start meets the limits (a warm start near the
+        constrained optimum: the box-only run would leave it and the rounds come back).
 
     Returns
     -------
@@ -106,7 +118,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     if n < 3:
         return OptimisationResult(x, 0, 0, 0)
     j_l0 = float(np.linalg.norm(np.diff(x, axis=0), axis=1).sum()) or 1.0
-    spring = SPACING_WEIGHT * (1.0 - w) * (n - 1) / j_l0
+    spring_unit = (1.0 - w) * (n - 1) / j_l0
     bounds = None
     floor = -np.inf if box is None else float(box.lo[2])
     if box is not None:
@@ -115,7 +127,8 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         bounds = [(a, b) for _ in range(n - 2) for a, b in zip(lo, box.hi)]
         x[1:-1] = np.clip(x[1:-1], lo, box.hi)
     ends = (x[0].copy(), x[-1].copy())
-    state = {'pairs': None, 'scale': None}
+    state = {'pairs': None, 'scale': None, 'spring': SPACING_WEIGHT * spring_unit,
+             'even': 0.0}
     positions, intensities = threats.positions, threats.intensities
 
     def pick_pairs(p: NDArray) -> None:
@@ -130,9 +143,20 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         p = full(z)
         j, g = cost_gradient(p, positions, intensities, w, state['pairs'])
         d = np.diff(p, axis=0)
+        spring = state['spring']
         j += spring * float(np.sum(d * d))
         g[:-1] -= 2.0 * spring * d
         g[1:] += 2.0 * spring * d
+        even = state['even']
+        if even > 0.0:
+            # m Var(segment length) = sum l^2 - (sum l)^2 / m: spreads the vertices evenly
+            # without the pull towards a shorter path a plain spring has.
+            ln = np.sqrt(np.einsum('ik,ik->i', d, d))
+            mean = float(ln.sum()) / len(ln)
+            j += even * float(ln @ ln - mean * mean * len(ln))
+            gd = 2.0 * even * d * (1.0 - mean / np.where(ln > 0, ln, np.inf))[:, None]
+            g[:-1] -= gd
+            g[1:] += gd
         if not np.isfinite(j):
             return 1e300, np.zeros_like(z)
         if state['scale'] is None:
@@ -150,7 +174,9 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     # With a cut-off the near threats are those of the path where they were picked; a path
     # that has moved far since may have flown towards threats it does not see, so re-pick
     # and continue until it stays within a quarter of the cut-off of the last pick.
-    for _ in range(MAX_PAIR_ROUNDS if cutoff is not None else 1):
+    skip = (constrained_only and limits.any_constraint
+            and check_limits(x, limits, floor).feasible)
+    for _ in range(0 if skip else MAX_PAIR_ROUNDS if cutoff is not None else 1):
         pick_pairs(x)
         state['scale'] = None
         z, nit, nfev = run(objective, x[1:-1].reshape(-1), max_iterations)
@@ -160,12 +186,18 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         x = moved
         if cutoff is None or shift < 0.25 * cutoff:
             break
-    if not limits.any_constraint or check_limits(x, limits, floor).feasible:
+    if not skip and (not limits.any_constraint or check_limits(x, limits, floor).feasible):
         return OptimisationResult(x, iterations, evaluations, rounds)
 
+    # Equal spacing first: the constraint gradients grow as 1 / segment length, and the
+    # unconstrained optimum bunches vertices at its corners.
+    if not skip:
+        x = resample(x, n - 1)
     pick_pairs(x)
+    state['even'] = EVEN_SPACING_WEIGHT * spring_unit
     aim = limits.tightened(ANGLE_MARGIN_DEG, RADIUS_MARGIN)
-    lam = np.zeros(len(constraint_values(x, aim)))
+    term = LimitTerm(aim, n)
+    lam = np.zeros(term.rows)
     mu = PENALTY_START
     prev_violation, prev_f = np.inf, np.inf
 
@@ -173,19 +205,15 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         f, g = objective(z)
         if f >= 1e300:
             return f, g
-        p = full(z)
-        c = constraint_values(p, aim)
-        s = np.maximum(0.0, lam - mu * c)
-        _, grad_c = constraint_vjp(p, aim, s)
-        val = f + (float(s @ s) - float(lam @ lam)) / (2.0 * mu)
-        return val, g - grad_c[1:-1].reshape(-1)
+        val, grad_c = term.penalty(full(z), lam, mu)
+        return f + val, g + grad_c[1:-1].reshape(-1)
 
-    best = None
+    best = (objective(x[1:-1].reshape(-1))[0], x) if skip else None
     for _ in range(MAX_OUTER):
         z, nit, nfev = run(lagrangian, x[1:-1].reshape(-1), constrained_iterations)
         iterations, evaluations, rounds = iterations + nit, evaluations + nfev, rounds + 1
         x = full(z)
-        c = constraint_values(x, aim)
+        c = term.values(x)
         violation = float(np.max(-c, initial=0.0))
         lam = np.maximum(0.0, lam - mu * c)
         f = objective(z)[0]
@@ -198,23 +226,6 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
             mu *= PENALTY_GROWTH
         prev_violation, prev_f = violation, f
     if best is not None:
-        return OptimisationResult(best[1], iterations, evaluations, rounds)
-
-    # The augmented Lagrangian stalled short of feasibility (steep walls in a crowded box):
-    # SLSQP, slower per iteration but sure-footed, continues from where it stopped.
-    def cons(z: NDArray) -> NDArray:
-        return constraint_values(full(z), aim)
-
-    def cons_jac(z: NDArray) -> NDArray:
-        return constraint_jacobian(full(z), aim)[:, 1:-1].reshape(len(lam), -1)
-
-    for _ in range(2):
-        res = minimize(objective, x[1:-1].reshape(-1), jac=True, method='SLSQP', bounds=bounds,
-                       constraints=[{'type': 'ineq', 'fun': cons, 'jac': cons_jac}],
-                       options={'maxiter': constrained_iterations, 'ftol': tolerance})
-        iterations, evaluations, rounds = (iterations + int(res.nit),
-                                           evaluations + int(res.nfev), rounds + 1)
-        x = full(res.x)
-        if check_limits(x, limits, floor).feasible:
-            break
-    return OptimisationResult(x, iterations, evaluations, rounds)
+        return OptimisationResult(best[1], iterations, evaluations, rounds, True)
+    # Stalled short of feasibility: the caller repairs (methods.repair) or reports.
+    return OptimisationResult(x, iterations, evaluations, rounds, True)

@@ -115,7 +115,8 @@ def _plan_warm(previous: PlanResult, threats: ThreatField, s: NDArray, t: NDArra
         return note
     problem = Problem(threats=threats, s=s, t=t, box=box, config=config,
                       network=previous.network, edge_j=None, clock=clock)
-    cand = refine(problem, path, previous.node_sequence, previous.seed, tolerance=1e-8)
+    cand = refine(problem, path, previous.node_sequence, previous.seed, tolerance=1e-8,
+                  warm=True)
     cand.basin_margin = previous.basin_margin
     clock.lap('warm_ms')
     if previous.feasible and not cand.limit_check.feasible:

@@ -337,7 +337,7 @@ def plan_done_info(values: Mapping[str, object], result: PlanResult, n_threats: 
     status = 'OK' if result.feasible else 'WARN'
     message = (f'plan for input #{values["input_seq"]} ({values["input_source"]}): '
                f'J={result.cost.J:.6g} through {n_threats} threats in {plan_ms:.0f} ms'
-               + ('' if result.feasible else '; violates the pitch or turn limit'))
+               + ('' if result.feasible else '; violates a flight limit'))
     return plan_info_msg(status, message, values, stamp)
 
 
@@ -363,7 +363,19 @@ def _result_values(result: PlanResult, n_threats: int) -> dict[str, object]:
         'path_points': len(result.path),
         'initial_path_points': len(result.initial_path),
     }
-    # Warm replanning is the core's (branch 'limits'); until PlanResult says, a plan is cold.
+    # Physical limits (method 'best'): those in force, the path's own values, the worst
+    # violation ('' when feasible). Infinities (a straight path's radius) print as inf.
+    for key, limit in result.limits.as_dict().items():
+        values[f'limit_{key}'] = limit
+    check = result.limit_check
+    if check is not None:
+        values['path_climb_deg'] = check.climb_deg
+        values['path_dive_deg'] = check.dive_deg
+        values['path_min_turn_radius_m'] = check.min_turn_radius_m
+        values['path_min_altitude_m'] = check.min_altitude_m
+        values['limits_feasible'] = check.feasible
+        values['worst_violation'] = '' if check.worst is None else (
+            f'{check.worst} {check.violations[check.worst]:.6g}')
     values['start'] = 'warm' if getattr(result, 'warm', False) else 'cold'
     if result.clearance is not None:   # airspace (issue 12): smallest margins [m]
         c = result.clearance
