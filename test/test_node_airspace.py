@@ -6,6 +6,7 @@ previous one) and checks the node's plans against the exact airspace checks of t
 """
 
 import signal
+import subprocess
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
@@ -17,8 +18,8 @@ from sensor_msgs.msg import Image, PointCloud2
 from visualization_msgs.msg import Marker, MarkerArray
 import yaml
 
-from node_harness import (cloud, domain_id, info, planner_command, pose, RosClient,
-                          start_process, stop_process, VOLATILE)
+from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON, REPO,
+                          ros_env, RosClient, start_process, stop_process, VOLATILE)
 from threat_planner.bag.bagfile import load_bag
 from threat_planner.bag.replay import replay_bag
 from threat_planner.core.airspace import Airspace, make_zone
@@ -221,3 +222,29 @@ def test_a_node_started_with_a_bad_airspace_file_exits_with_the_reason(tmp_path)
     assert proc.wait(60) == 1
     assert (f'cannot start: airspace_file {bad}: no_fly_zones[0].z_max: must exceed z_min '
             '(10.0), got 2.0') in log.read_text()
+
+
+def test_live_replay_of_an_airspace_recording_drives_a_node_to_its_plan(client, tmp_path):
+    bag = tmp_path / 'air.mcap'
+    subprocess.run([PYTHON, '-m', 'threat_planner.cli', 'plan',
+                    str(REPO / 'test' / 'data' / 'air_mixed_0.yaml'), '--record', str(bag)],
+                   check=True, capture_output=True, cwd=REPO, timeout=300)
+    ns = '/airlive'
+    client.subscribe(f'{ns}/plan_info', DiagnosticArray)
+    proc = start_process(planner_command(ns), DOMAIN, tmp_path / 'node.log')
+    try:
+        p = subprocess.run([PYTHON, '-m', 'threat_planner.cli', 'replay', str(bag), '--live',
+                            '--rate', '4', '--namespace', ns], capture_output=True, text=True,
+                           cwd=REPO, env=ros_env(DOMAIN), timeout=300)
+        assert p.returncode == 0, p.stdout + p.stderr
+        recorded = load_bag(bag).plans[-1]
+        got = info(client.wait_for(f'{ns}/plan_info', lambda m: info(m)['level'] == 'OK'
+                                   and int(info(m)['input_stamp_ns']) == recorded.stamp_ns,
+                                   PLAN_TIMEOUT))
+    finally:
+        code = stop_process(proc)
+    assert code == 0, (tmp_path / 'node.log').read_text()
+    # The node got zones, terrain (with its grid parameters) and threats from the bag.
+    assert float(got['J']) == pytest.approx(float(recorded.values['J']), rel=1e-12)
+    assert float(got['clearance_terrain_m']) == pytest.approx(
+        float(recorded.values['clearance_terrain_m']), rel=1e-9)

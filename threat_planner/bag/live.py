@@ -56,6 +56,13 @@ class LiveResult:
     node_name: str
 
 
+#: Least gap between inputs on different topics [s]: messages arriving together on several
+#: topics are taken by the node's executor in subscription order, not in publishing order,
+#: so back-to-back inputs (``plan --record`` writes them microseconds apart: start, goal,
+#: zones, terrain, threats) are spaced by this to reach the node in the recorded order.
+TOPIC_SWITCH_GAP_S = 0.05
+
+
 def _normalise_ns(namespace: str) -> str:
     return '/' + namespace.strip('/') if namespace.strip('/') else ''
 
@@ -88,7 +95,9 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
     of its own, waits until the planner subscribes to every input topic the recording
     has, sets the recorded parameters (all but ``record``) atomically through the
     planner's parameter services, then publishes each recorded input, and applies each
-    recorded parameter change, at its recorded time divided by `rate`. Messages go out
+    recorded parameter change, at its recorded time divided by `rate` (inputs on different
+    topics at least :data:`TOPIC_SWITCH_GAP_S` apart, so that they arrive in the recorded
+    order). Messages go out
     as recorded, header stamps included, so the node's ``plan_info`` names them.
     Finally it waits for the node to answer the last input the recording shows answered.
 
@@ -203,10 +212,14 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
         started = time.monotonic()
         t0 = bag.inputs[0].log_time_ns
         changes = 0
+        previous, previous_t = None, -math.inf
         for n, inp in enumerate(bag.inputs, 1):
             delay = started + 1e-9 * (inp.log_time_ns - t0) / rate - time.monotonic()
+            if inp.source != previous:
+                delay = max(delay, previous_t + TOPIC_SWITCH_GAP_S - time.monotonic())
             if delay > 0:
                 time.sleep(delay)
+            previous, previous_t = inp.source, time.monotonic()
             if inp.source != PARAMETERS:
                 publishers[inp.source].publish(inp.msg)
             elif client is not None:
