@@ -294,6 +294,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument('--skip', nargs='*', default=[], choices=list(OURS),
                    help='threat_planner variants to skip')
     p.add_argument('--seed', type=int, default=1, help='OMPL random seed')
+    p.add_argument('--scale', action='store_true',
+                   help='also run the scaling sweep (bench/run_scale.py -> scale.md)')
     p.add_argument('--rescore', action='store_true',
                    help='only re-score benchmark.json against the current yardsticks')
     p.add_argument('--speed', action='store_true',
@@ -322,6 +324,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.speed:
         bench['speed'] = measure_speed(args)
         write_outputs(bench, args.out)
+    if args.scale:
+        import run_scale
+        run_scale.main(['--out', str(args.out), '--repeats', str(args.repeats)]
+                       + (['--quick'] if args.quick else []))
     print_targets(br.evaluate_targets(bench['cases'], bench.get('speed')))
     print(f'\nResults in {args.out}')
     return 0

@@ -49,17 +49,12 @@ _TIME = re.compile(r'time: ([0-9.]+) ms')
 
 def split_scenario(yaml_path: Path, folder: Path) -> dict[str, Path]:
     """Write the scenario with its threats in a .npy and in a .csv file; return the YAMLs."""
-    doc = yaml.load(yaml_path.read_bytes(), Loader=getattr(yaml, 'CSafeLoader', yaml.SafeLoader))
-    rows = np.array([[*t['position'], t['intensity']] for t in doc.pop('threats')], float)
+    from threat_planner.core.scenario import load_scenario, save_scenario
+    sc = load_scenario(yaml_path)
     out = {}
     for suffix in ('npy', 'csv'):
-        table = folder / f'threats.{suffix}'
-        if suffix == 'npy':
-            np.save(table, rows)
-        else:
-            np.savetxt(table, rows, delimiter=',', fmt='%.17g', header='x,y,z,F', comments='')
         path = folder / f'{yaml_path.stem}_{suffix}.yaml'
-        path.write_text(yaml.safe_dump({**doc, 'threats_file': table.name}, sort_keys=False))
+        save_scenario(sc, path, f'threats.{suffix}')
         out[f'plan, threats_file .{suffix}'] = path
     return out
 

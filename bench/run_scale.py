@@ -4,7 +4,7 @@ Usage (from the repository root, with the project's virtualenv)::
 
     .venv/bin/python bench/run_scale.py             # N = 20 ... 10000, ~5 min
     .venv/bin/python bench/run_scale.py --quick     # N <= 1000, 1 repeat
-    .venv/bin/python bench/run_benchmark.py --scale-only   # the same, plus the targets
+    .venv/bin/python bench/run_benchmark.py --scale        # the benchmark, then this
 
 For N = 20, 100, 300, 1000, 3000 and 10000 threats placed uniformly at random (fixed seed)
 in a cube of side ``100 (N / 20)^(1/3)`` m, the density of the 20-threat scenarios, with

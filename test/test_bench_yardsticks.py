@@ -89,3 +89,24 @@ def test_committed_yardsticks_load_and_agree_with_reference_box():
         y = table.get(load_scenario(DATA / f'{name}.yaml'), float(w))
         if y.box_check is not None:
             assert abs(y.box_check - 1.0) < 1e-3, key
+
+
+def test_score_case_checks_the_limits_row_independently(sc):
+    rb = importlib.import_module('run_benchmark')
+    br = importlib.import_module('benchmark_report')
+    line = np.array([sc.start, sc.goal])
+    j = path_cost(line, sc.threats.positions, sc.threats.intensities, W).J
+    up = 20.0 if sc.start[2] + 20.0 <= sc.box.hi[2] else -20.0
+    spike = np.array([sc.start, sc.box.clip(sc.start + [1.0, 1.0, up]), sc.goal])
+    y = yd.Yardsticks(j / 1.01, 'bench 41^3', 1.0, j, yd.Limits(30.0, 30.0, 10.0), j * 0.9)
+    case = {'methods': {br.ON: {'J': j, 'path': line.tolist()},
+                        br.OFF: {'J': j, 'path': (line + [0.0, 0.0, 1e3]).tolist()}}}
+    rb.score_case(case, sc, y)
+    on, off = case['methods'][br.ON], case['methods'][br.OFF]
+    assert on['ratio'] == pytest.approx(1.01) and on['ratio_limited'] == pytest.approx(1.0)
+    assert on['limits_ok'] and on['worst_violation'] == '' and on['in_box']
+    assert not off['in_box'] and case['yardsticks']['in_box_source'] == 'bench 41^3'
+    case['methods'][br.ON]['path'] = spike.tolist()
+    rb.score_case(case, sc, y)
+    assert not case['methods'][br.ON]['limits_ok']
+    assert 'vs 30' in case['methods'][br.ON]['worst_violation']

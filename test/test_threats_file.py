@@ -104,3 +104,23 @@ def test_cli_plans_a_split_scenario_and_reports_a_missing_table_in_one_line(tmp_
     bad = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and bad.stderr.count('\n') == 1
     assert 'threats_file: cannot read' in bad.stderr and 'Traceback' not in bad.stderr
+
+
+@pytest.mark.parametrize('threats_file', [None, 'big.npy', 'big.csv'])
+def test_save_scenario_round_trip(tmp_path, threats_file):
+    from threat_planner.core.scenario import save_scenario
+    sc = load_scenario(DATA / 'clustered_0.yaml')
+    save_scenario(sc, tmp_path / 'out.yaml', threats_file)
+    back = load_scenario(tmp_path / 'out.yaml')
+    assert np.array_equal(back.threats.positions, sc.threats.positions)
+    assert np.array_equal(back.threats.intensities, sc.threats.intensities)
+    assert np.array_equal(back.start, sc.start) and np.array_equal(back.box.hi, sc.box.hi)
+    assert ('threats_file' in yaml.safe_load((tmp_path / 'out.yaml').read_text())) == bool(
+        threats_file)
+
+
+def test_save_scenario_refuses_a_bad_table_name(tmp_path):
+    from threat_planner.core.scenario import save_scenario
+    from threat_planner.errors import InputError
+    with pytest.raises(InputError, match='threats_file: t.json must end in .npy or .csv'):
+        save_scenario(load_scenario(DATA / 'weak20_0.yaml'), tmp_path / 'o.yaml', 't.json')

@@ -257,3 +257,37 @@ def load_scenario(path: str | Path) -> Scenario:
         where = f' at line {mark.line + 1}' if mark else ''
         raise ScenarioError(f'{path}: not valid YAML{where}') from None
     return scenario_from_dict(data, str(path))
+
+
+def save_scenario(scenario: Scenario, path: str | Path, threats_file: str | None = None) -> None:
+    """Write a scenario file that :func:`load_scenario` reads back to the same scenario.
+
+    Args:
+        scenario: The scenario.
+        path: The YAML file to write.
+        threats_file: If given (``*.npy`` or ``*.csv``, relative to the YAML's folder), the
+            threats go there as x y z F instead of the YAML list: for big pictures. Lethal
+            radii need the list (the table has no column for them).
+
+    Raises:
+        InputError: a bad ``threats_file`` name, or lethal radii with a ``threats_file``.
+    """
+    path = Path(path)
+    doc = scenario.to_dict()
+    if threats_file is not None:
+        suffix = Path(threats_file).suffix.lower()
+        if suffix not in THREATS_FILE_SUFFIXES:
+            raise InputError(f'threats_file: {threats_file} must end in '
+                             f'{" or ".join(THREATS_FILE_SUFFIXES)}')
+        if any('lethal_radius' in t for t in doc['threats']):
+            raise InputError('threats_file: lethal radii need the threats list')
+        rows = np.column_stack([scenario.threats.positions, scenario.threats.intensities])
+        table = path.parent / threats_file
+        if suffix == '.npy':
+            np.save(table, rows)
+        else:
+            # 17 significant digits: the floats read back bit for bit.
+            np.savetxt(table, rows, delimiter=',', fmt='%.17g', header='x,y,z,F', comments='')
+        doc.pop('threats')
+        doc['threats_file'] = threats_file
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
