@@ -58,7 +58,8 @@ def plan_on_request(state: InputState, request: GetPlan.Request) -> tuple[Path, 
             raise InputError('no threat picture received yet')
         s = accept(state, 'start', request.start)
         s = accept(s, 'goal_pose', request.goal)
-        result = plan(s.threats, s.start, s.goal, s.settings.box, s.settings.config)
+        result = plan(s.threats, s.start, s.goal, s.settings.box, s.settings.config,
+                      airspace=s.airspace)
     except (InputError, PlanningError) as exc:
         return _empty_path(frame_id, request), str(exc)
     except Exception as exc:  # noqa: B902 - a planner bug must not kill the service
