@@ -305,6 +305,9 @@ def replay_bag(bag: Bag, *, tolerance: float = DEFAULT_TOLERANCE,
     states = _states(bag)
     offset = _seq_offset(bag)
     rows = []
+    # The node's plan process replans warm from its previous plan, and plan_info says when;
+    # a warm recorded plan is re-planned warm from the previous re-plan, as the node did.
+    previous: List[Optional[PlanResult]] = [None]
     for n, rec in enumerate(bag.plans, 1):
         row = ReplayRow(rec.index, rec.seq, rec.source, rec.stamp_ns, rec.log_time_ns,
                         rec.outcome)
@@ -315,14 +318,15 @@ def replay_bag(bag: Bag, *, tolerance: float = DEFAULT_TOLERANCE,
             row.ok = False
             row.note = f'input #{rec.seq} ({rec.source}) is not in the recording'
         else:
-            _replay_one(row, rec, states[k - 1], overrides, tolerance)
+            _replay_one(row, rec, states[k - 1], overrides, tolerance, previous)
         if progress is not None:
             progress(n, len(bag.plans))
     return ReplayReport(bag, tolerance, overrides, rows)
 
 
 def _replay_one(row: ReplayRow, rec: BagPlan, state_reason: Tuple[InputState, Optional[str]],
-                overrides: Mapping[str, object], tol: float) -> None:
+                overrides: Mapping[str, object], tol: float,
+                previous: List[Optional[PlanResult]]) -> None:
     state, reason = state_reason
     config = replace(state.settings.config, **overrides)
     row.method = config.method
@@ -336,8 +340,10 @@ def _replay_one(row: ReplayRow, rec: BagPlan, state_reason: Tuple[InputState, Op
         return
     else:
         try:
+            warm = previous[0] if rec.values.get('start') == 'warm' else None
             result = plan(state.threats, state.start, state.goal, state.settings.box, config,
-                          airspace=state.airspace)
+                          airspace=state.airspace, warm_start=warm)
+            previous[0] = result
         except (InputError, PlanningError) as exc:
             row.replayed = 'failed'
             note = f'failed: {exc}'

@@ -241,6 +241,10 @@ SETTINGS: tuple[Setting, ...] = (
             lo_open=True, scope='node'),
     Setting('max_threats', int, 10000, 'Largest threat picture accepted', lo=0,
             hi=1_000_000, scope='node'),
+    Setting('warm_replan', bool, True,
+            'Replan from the previous path after a small change (threats moved by at most 1 % '
+            'of the box, start along the last path; core/warm.py); plan_info says warm or cold',
+            scope='node'),
     Setting('max_plan_time_s', float, 60.0,
             'Longest time one plan may take; a longer one is stopped and reported as timed '
             'out in plan_info', unit='s', lo=0.0, hi=86400.0, lo_open=True, scope='node'),

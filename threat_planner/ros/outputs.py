@@ -76,7 +76,8 @@ class PlanOutcome:
 def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None],
              now_ns: Callable[[], int],
              progress: Optional[Callable[[int, int], None]] = None,
-             early: Optional[Callable[[PlanOutcome], None]] = None) -> PlanOutcome:
+             early: Optional[Callable[[PlanOutcome], None]] = None,
+             warm_start: Optional[PlanResult] = None) -> PlanOutcome:
     """Plan `request` and build its messages, handing each phase over when it is ready.
 
     Parameters
@@ -92,6 +93,8 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
     early : callable, optional
         Called with an outcome holding ``best_so_far`` (the network route) as soon as the
         search has found it, before the smoothing and optimisation.
+    warm_start : PlanResult, optional
+        The previous plan, to replan from after a small change (core/warm.py decides).
 
     Returns
     -------
@@ -114,7 +117,7 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
     try:
         result = plan(request.threats, request.start, request.goal, s.box, s.config,
                       progress=progress, on_initial=None if early is None else on_initial,
-                      airspace=request.airspace)
+                      airspace=request.airspace, warm_start=warm_start)
         t1 = time.perf_counter()
         outcome.plan_ms = 1e3 * (t1 - t0)
         outcome.result = result

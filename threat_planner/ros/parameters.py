@@ -62,6 +62,8 @@ class NodeSettings:
         Largest accepted threat picture.
     max_plan_time_s : float
         Longest time of one plan [s].
+    warm_replan : bool
+        Whether the plan process replans warm from its previous plan when it may.
     record : str
         Recording target, '' for none.
     airspace_file : str
@@ -85,6 +87,7 @@ class NodeSettings:
     max_plan_time_s: float
     record: str
     airspace_file: str = ''
+    warm_replan: bool = True
     terrain_origin: NDArray = field(default_factory=lambda: np.zeros(2))
     terrain_resolution: float = 10.0
     terrain_clearance: float = 0.0
@@ -142,7 +145,7 @@ def settings_from_parameters(values: Mapping[str, object]) -> NodeSettings:
     goal = as_point('goal', _numbers('goal', values['goal'], 3, '[x, y, z]'))
     for name in ('frame_id', 'default_intensity', 'max_threats', 'max_plan_time_s', 'record',
                  'airspace_file', 'terrain_resolution', 'terrain_clearance',
-                 'terrain_masking'):
+                 'terrain_masking', 'warm_replan'):
         NODE_SETTINGS[name].check(values[name])
     origin = _numbers('terrain_origin', values['terrain_origin'], 2, '[x, y]')
     return NodeSettings(config=config, box=box, frame_id=values['frame_id'], start=start,
@@ -154,7 +157,8 @@ def settings_from_parameters(values: Mapping[str, object]) -> NodeSettings:
                         terrain_origin=origin,
                         terrain_resolution=float(values['terrain_resolution']),
                         terrain_clearance=float(values['terrain_clearance']),
-                        terrain_masking=bool(values['terrain_masking']))
+                        terrain_masking=bool(values['terrain_masking']),
+                        warm_replan=bool(values['warm_replan']))
 
 
 def descriptor(name: str) -> ParameterDescriptor:

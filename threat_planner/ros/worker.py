@@ -127,13 +127,18 @@ def _child_main(conn) -> None:
     def early(outcome) -> None:
         conn.send(('initial', outcome))
 
+    # The child's last plan, for a warm replan after a small change: a child replaced
+    # after a cancel or a timeout starts cold, and plan_info says which (replay follows).
+    previous = None
     while True:
         try:
             request = conn.recv()
         except (EOFError, OSError):
             return
         conn.send(('started', None))
-        run_plan(request, hand_over, time.time_ns, early=early)
+        warm = previous if request.settings.warm_replan else None
+        outcome = run_plan(request, hand_over, time.time_ns, early=early, warm_start=warm)
+        previous = outcome.result if outcome.result is not None else previous
         conn.send(('end', None))
 
 

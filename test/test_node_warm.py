@@ -1,0 +1,61 @@
+"""Warm replanning in the node: a small change replans from the previous path (issue 13).
+
+The node's plan process keeps its last plan; after the threats move by much less than 1 %
+of the box it replans warm (core/warm.py decides), says so in ``plan_info`` (``start``),
+and is no worse than a cold plan of the same picture. Replay of the node's recording
+re-plans the warm plan warm too, and reproduces it.
+"""
+
+import signal
+
+from diagnostic_msgs.msg import DiagnosticArray
+import numpy as np
+from sensor_msgs.msg import PointCloud2
+
+from node_harness import (cloud, domain_id, info, planner_command, REPO, RosClient,
+                          start_process, stop_process)
+from threat_planner.bag.bagfile import load_bag
+from threat_planner.bag.replay import replay_bag
+from threat_planner.core.planner import plan
+from threat_planner.core.scenario import load_scenario
+from threat_planner.core.threats import ThreatField
+from threat_planner.ros.conversions import threats_from_pointcloud2
+
+SCENARIO = load_scenario(REPO / 'test' / 'data' / 'weak20_0.yaml')
+
+
+def test_a_small_move_replans_warm_no_worse_than_cold_and_replays(tmp_path):
+    domain = domain_id(152)
+    params = {'start': SCENARIO.start.tolist(), 'goal': SCENARIO.goal.tolist(),
+              'bounds': SCENARIO.box.lo.tolist() + SCENARIO.box.hi.tolist(),
+              'record': str(tmp_path / 'bags')}
+    proc = start_process(planner_command('/warm', params), domain, tmp_path / 'node.log')
+    client = RosClient(domain, 'warm_client')
+    try:
+        client.subscribe('/warm/plan_info', DiagnosticArray)
+        pub = client.publisher('/warm/threats', PointCloud2)
+        client.wait_matched(pub, timeout=30.0)
+        answers = []
+        sent = []
+        for k, shift in enumerate((0.0, 0.05)):
+            msg = cloud(SCENARIO.threats.positions + shift, SCENARIO.threats.intensities)
+            msg.header.stamp.sec = 10 + k
+            pub.publish(msg)
+            sent.append(msg)
+            answers.append(info(client.wait_for(
+                '/warm/plan_info', lambda m, s=10 + k: info(m)['input_stamp_ns'] ==
+                str(s * 10**9), timeout=120.0)))
+    finally:
+        client.close()
+        assert stop_process(proc, signal.SIGTERM) == 0
+    assert [a['start'] for a in answers] == ['cold', 'warm']
+    positions, intensities = threats_from_pointcloud2(sent[1], 'map')
+    cold = plan(ThreatField.from_arrays(positions, intensities), SCENARIO.start,
+                SCENARIO.goal, SCENARIO.box)
+    assert not cold.warm
+    assert float(answers[1]['J']) <= cold.cost.J * (1 + 1e-9)
+    bag = next((tmp_path / 'bags').glob('*/'))
+    report = replay_bag(load_bag(bag))
+    assert report.ok, report.difference_text()
+    assert len([r for r in report.rows if r.replayed in ('OK', 'WARN')]) == 2
+    assert np.isfinite(float(answers[1]['total_ms']))
