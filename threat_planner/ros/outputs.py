@@ -60,7 +60,7 @@ class PlanOutcome:
     result: Optional[PlanResult] = None
     initial_path: Optional[Path] = None
     path: Optional[Path] = None
-    network: Optional[MarkerArray] = None
+    network: Optional[MarkerArray] = None   # or its CDR bytes, from the plan process
     network_error: Optional[str] = None
     error: Optional[str] = None
     exception: Optional[Exception] = None
