@@ -91,7 +91,9 @@ def _check_keys(mapping: dict, known: tuple, where: str, fail) -> None:
             continue
         close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
         hint = f'; did you mean "{close[0]}"?' if close else ''
-        raise fail(f'unknown field "{where}{key}"{hint} (known: {", ".join(known)})')
+        # A key with control characters (a stray newline) is shown escaped: one line.
+        name = str(key) if str(key).isprintable() else repr(str(key))[1:-1]
+        raise fail(f'unknown field "{where}{name}"{hint} (known: {", ".join(known)})')
 
 
 def _is_header(line: str) -> bool:
