@@ -25,9 +25,10 @@ import re
 import struct
 from typing import Dict, List, Optional, Tuple
 
+from threat_planner.bag.definitions import message_definition, message_type_name
 from threat_planner.errors import RecordingError
 
-__all__ = ['CdrLayout', 'canonical_cdr', 'parse_definition']
+__all__ = ['CdrLayout', 'canonical_cdr', 'parse_definition', 'serialize_cdr']
 
 _SIZES = {'bool': 1, 'byte': 1, 'char': 1, 'int8': 1, 'uint8': 1, 'int16': 2, 'uint16': 2,
           'int32': 4, 'uint32': 4, 'float32': 4, 'int64': 8, 'uint64': 8, 'float64': 8}
@@ -361,3 +362,28 @@ def canonical_cdr(data: bytes, type_name: str, definition: str) -> bytes:
 
     """
     return _layout(type_name, definition).canonical(data)
+
+
+def serialize_cdr(msg, topic: str = '') -> bytes:
+    """Serialise an rclpy message to its exact CDR payload (no trailing bytes, padding 0).
+
+    rclpy's buffer has trailing bytes and uninitialised padding (see bag/cdr.py); what this
+    returns is what the recorder writes and what a publisher may send as raw bytes.
+
+    Raises
+    ------
+    RecordingError
+        Naming `topic`, if the message cannot be serialised.
+
+    """
+    from rclpy.serialization import serialize_message
+    where = f'{topic}: ' if topic else ''
+    try:
+        data = serialize_message(msg)
+    except Exception as exc:  # noqa: B902 - rclpy's C layer raises assorted types
+        raise RecordingError(f'{where}cannot serialise {type(msg).__name__}: {exc}') from exc
+    type_name = message_type_name(msg)
+    try:
+        return canonical_cdr(data, type_name, message_definition(type_name))
+    except RecordingError as exc:
+        raise RecordingError(f'{where}{exc}') from exc

@@ -30,7 +30,7 @@ from typing import Dict, Optional, Union
 
 from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 
-from threat_planner.bag.cdr import canonical_cdr
+from threat_planner.bag.cdr import serialize_cdr
 from threat_planner.bag.definitions import (canonical_type_name, MESSAGE_ENCODING,
                                             message_definition, message_type_name, PROFILE,
                                             SCHEMA_ENCODING, type_description_hash)
@@ -39,7 +39,7 @@ from threat_planner.bag.metadata import (bag_information, file_entry, io_reason,
 from threat_planner.bag.qos import as_topic_qos, TopicQos
 from threat_planner.errors import RecordingError
 
-__all__ = ['DEFAULT_FLUSH_INTERVAL_S', 'McapRecorder', 'end_chunk', 'serialize_cdr']
+__all__ = ['DEFAULT_FLUSH_INTERVAL_S', 'McapRecorder', 'end_chunk']
 
 _LOG = logging.getLogger(__name__)
 
@@ -70,31 +70,6 @@ def end_chunk(writer: Writer) -> None:
         public()
     else:
         writer._Writer__finalize_chunk()
-
-
-def serialize_cdr(msg, topic: str = '') -> bytes:
-    """Serialise an rclpy message to its exact CDR payload (no trailing bytes, padding 0).
-
-    rclpy's buffer has trailing bytes and uninitialised padding (see bag/cdr.py); what this
-    returns is what the recorder writes and what a publisher may send as raw bytes.
-
-    Raises
-    ------
-    RecordingError
-        Naming `topic`, if the message cannot be serialised.
-
-    """
-    from rclpy.serialization import serialize_message
-    where = f'{topic}: ' if topic else ''
-    try:
-        data = serialize_message(msg)
-    except Exception as exc:  # noqa: B902 - rclpy's C layer raises assorted types
-        raise RecordingError(f'{where}cannot serialise {type(msg).__name__}: {exc}') from exc
-    type_name = message_type_name(msg)
-    try:
-        return canonical_cdr(data, type_name, message_definition(type_name))
-    except RecordingError as exc:
-        raise RecordingError(f'{where}{exc}') from exc
 
 
 @dataclasses.dataclass

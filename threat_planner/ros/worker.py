@@ -120,7 +120,7 @@ def _child_main(conn) -> None:
     # Ctrl-C reaches the whole process group; the parent decides when this child ends.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
-    from threat_planner.bag.writer import serialize_cdr
+    from threat_planner.bag.cdr import serialize_cdr
 
     def hand_over(phase, outcome) -> None:
         outcome.exception = None  # the text is in outcome.error; exceptions may not pickle
