@@ -43,8 +43,18 @@ LEVEL_NAMES = {DiagnosticStatus.OK: 'OK', DiagnosticStatus.WARN: 'WARN',
                DiagnosticStatus.ERROR: 'ERROR'}
 
 
+#: Fast DDS computes its ports from the domain id; above 232 they pass 65535 and the
+#: participant cannot be created (the process then dies without a word).
+MAX_DOMAIN_ID = 232
+
+
 def domain_id(offset: int, span: int = 40) -> int:
-    """Return a ROS domain id for this process: `offset` + pid modulo `span` (keep <= 101)."""
+    """Return a ROS domain id for this process: `offset` + pid modulo `span`.
+
+    Raises ValueError for an offset whose range reaches past MAX_DOMAIN_ID.
+    """
+    if offset + span - 1 > MAX_DOMAIN_ID:
+        raise ValueError(f'domain offset {offset} + span {span} passes {MAX_DOMAIN_ID}')
     return offset + os.getpid() % span
 
 

@@ -20,7 +20,7 @@ SCENARIO = load_scenario(REPO / 'test' / 'data' / 'uniform20_0.yaml')
 
 def test_the_request_beyond_the_bound_is_refused_with_an_empty_path(tmp_path):
     assert QUEUE_BOUND == 8
-    domain = domain_id(221)
+    domain = domain_id(191)
     log = tmp_path / 'node.log'
     # 'improved' sweeps 26 values of k for every entry/exit pair: each request takes tens of
     # seconds (the topic plan is cut short by max_plan_time_s; requests have no limit).
