@@ -285,3 +285,61 @@ class RosClient:
         self.wait_until(future.done, timeout, f'set_parameters on {node_name}')
         response = future.result()
         return [response.result] if atomically else list(response.results)
+
+
+class PlannerNode:
+    """A planner process in namespace `ns`, with this process's publishers for it.
+
+    `plan_info` and `path` are subscribed; `threats`, `threat_poses` and `start` have
+    publishers. Input stamps count up from 1 s, so each answer can be found by its stamp.
+    """
+
+    def __init__(self, client: 'RosClient', domain: int, ns: str, params: dict,
+                 log_path: Path, scenario) -> None:
+        from geometry_msgs.msg import PoseArray
+        from nav_msgs.msg import Path as PathMsg
+        from sensor_msgs.msg import PointCloud2
+        self.client, self.ns, self.log_path, self.scenario = client, ns, log_path, scenario
+        self.proc = start_process(planner_command(ns, params), domain, log_path)
+        client.subscribe(f'{ns}/plan_info', DiagnosticArray)
+        client.subscribe(f'{ns}/path', PathMsg)
+        self.threats = client.publisher(f'{ns}/threats', PointCloud2)
+        self.poses = client.publisher(f'{ns}/threat_poses', PoseArray)
+        self.start = client.publisher(f'{ns}/start', PoseStamped, VOLATILE)
+        for pub in (self.threats, self.poses, self.start):
+            client.wait_matched(pub, timeout=30.0)
+        self.sec = 0
+
+    @property
+    def name(self) -> str:
+        """Fully qualified node name."""
+        return f'{self.ns}/threat_planner'
+
+    def stamp(self) -> Time:
+        """The next input stamp."""
+        self.sec += 1
+        return Time(sec=self.sec)
+
+    def picture(self) -> int:
+        """Publish the scenario's threat picture; return its stamp [s]."""
+        stamp = self.stamp()
+        self.threats.publish(cloud(self.scenario.threats.positions,
+                                   self.scenario.threats.intensities, stamp=stamp))
+        return stamp.sec
+
+    def answer(self, sec: int, timeout: float = 60.0) -> dict:
+        """The plan_info that answers the input stamped `sec`."""
+        stamp = str(sec * 1_000_000_000)
+        return info(self.client.wait_for(
+            f'{self.ns}/plan_info', lambda m: info(m)['input_stamp_ns'] == stamp, timeout))
+
+    def plan_of(self, sec: int, timeout: float = 30.0) -> dict:
+        """The plan_info of the plan (not an error) for the input stamped `sec`."""
+        stamp = str(sec * 1_000_000_000)
+        return info(self.client.wait_for(
+            f'{self.ns}/plan_info',
+            lambda m: 'J' in info(m) and info(m)['input_stamp_ns'] == stamp, timeout))
+
+    def log(self) -> str:
+        """The node's log so far."""
+        return self.log_path.read_text(errors='replace')

@@ -11,15 +11,12 @@
 import signal
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Pose, PoseArray, PoseStamped
-from nav_msgs.msg import Path as PathMsg
+from geometry_msgs.msg import Pose, PoseArray
 import pytest
 from rcl_interfaces.msg import ParameterType
-from sensor_msgs.msg import PointCloud2
 
-from node_harness import (cloud, domain_id, info, planner_command, pose, REPO, RosClient,
-                          start_process, stop_process, VOLATILE)
+from node_harness import (cloud, domain_id, info, planner_command, PlannerNode, pose, REPO,
+                          RosClient, start_process, stop_process)
 from threat_planner.core.scenario import load_scenario
 from threat_planner.core.settings import NODE_SETTINGS
 from threat_planner.core.threats import as_point, COORDINATE_LIMIT_M, ThreatField
@@ -42,48 +39,10 @@ def client():
     c.close()
 
 
-class Node:
-    """A planner process in namespace `ns` with its plan_info and publishers."""
-
-    def __init__(self, client, ns, params, log_path):
-        self.client, self.ns, self.log_path = client, ns, log_path
-        self.proc = start_process(planner_command(ns, params), DOMAIN, log_path)
-        client.subscribe(f'{ns}/plan_info', DiagnosticArray)
-        client.subscribe(f'{ns}/path', PathMsg)
-        self.threats = client.publisher(f'{ns}/threats', PointCloud2)
-        self.poses = client.publisher(f'{ns}/threat_poses', PoseArray)
-        self.start = client.publisher(f'{ns}/start', PoseStamped, VOLATILE)
-        for pub in (self.threats, self.poses, self.start):
-            client.wait_matched(pub, timeout=30.0)
-        self.sec = 0
-
-    @property
-    def name(self):
-        return f'{self.ns}/threat_planner'
-
-    def stamp(self):
-        self.sec += 1
-        return Time(sec=self.sec)
-
-    def answer(self, sec, timeout=60.0):
-        """The plan_info that answers the input stamped `sec`."""
-        stamp = str(sec * 1_000_000_000)
-        return info(self.client.wait_for(
-            f'{self.ns}/plan_info', lambda m: info(m)['input_stamp_ns'] == stamp, timeout))
-
-    def picture(self):
-        stamp = self.stamp()
-        self.threats.publish(cloud(SCENARIO.threats.positions, SCENARIO.threats.intensities,
-                                   stamp=stamp))
-        return stamp.sec
-
-    def log(self):
-        return self.log_path.read_text(errors='replace')
-
-
 @pytest.fixture(scope='module')
 def node(client, tmp_path_factory):
-    n = Node(client, '/rel', FAST, tmp_path_factory.mktemp('rel') / 'node.log')
+    n = PlannerNode(client, DOMAIN, '/rel', FAST, tmp_path_factory.mktemp('rel') / 'node.log',
+                    SCENARIO)
     yield n
     assert stop_process(n.proc, signal.SIGTERM) == 0, n.log()
     assert 'Traceback' not in n.log(), n.log()
