@@ -157,11 +157,38 @@ class LimitTerm:
                      math.sin(math.radians(limits.max_dive_deg)),
                      float(limits.min_turn_radius_m), limits.climb_on, limits.dive_on,
                      limits.radius_on and vertices >= 3)
+        self.vertices = vertices
         n = vertices - 1
         radius_rows = max(n - 1, 0) if self.args[5] else 0
         self.rows = (limits.climb_on + limits.dive_on) * n + radius_rows
         self._g = np.zeros(self.rows)
         self._grad = np.zeros((vertices, 3))
+
+    def transfer(self, coarse: tuple['LimitTerm', NDArray]) -> NDArray:
+        """Multipliers of this term from those of the same limits on a coarser path.
+
+        A multiplier is the density of the continuous one times the spacing (its row's
+        share of the path), so it is interpolated along the path's parameter and scaled
+        by the ratio of the segment counts.
+        """
+        term, lam = coarse
+        nc, nf = term.vertices - 1, self.vertices - 1
+        out = np.zeros(self.rows)
+        seg_c, seg_f = (np.arange(nc) + 0.5) / nc, (np.arange(nf) + 0.5) / nf
+        ver_c, ver_f = np.arange(1, nc) / nc, np.arange(1, nf) / nf
+        rc = rf = 0
+        for on, (uc, uf) in zip(self.args[3:], ((seg_c, seg_f), (seg_c, seg_f),
+                                                (ver_c, ver_f))):
+            if not on:
+                continue
+            if len(uf) and len(uc):
+                out[rf:rf + len(uf)] = np.interp(uf, uc, lam[rc:rc + len(uc)]) * nc / nf
+            rc, rf = rc + len(uc), rf + len(uf)
+        return out
+
+    def kernel_args(self) -> NDArray:
+        """The term as :func:`threat_planner.core.lbfgs.minimise` takes it, (7,)."""
+        return np.array([*self.args[:3], *(float(flag) for flag in self.args[3:]), 1.0])
 
     def values(self, points: NDArray) -> NDArray:
         """Constraint values g (>= 0 where the limits hold), (rows,)."""

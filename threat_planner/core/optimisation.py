@@ -17,9 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import minimize
-
-from threat_planner.core.kernels import cost_gradient
+from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS
+from threat_planner.core.lbfgs import _objective, minimise
 from threat_planner.core.limit_kernels import LimitTerm
 from threat_planner.core.limits import check_limits, FlightLimits
 from threat_planner.core.smoothing import resample
@@ -45,6 +44,9 @@ PENALTY_GROWTH = 10.0
 MAX_OUTER = 6
 #: Stop the outer rounds once feasible and J (scaled) changed by less than this.
 OUTER_TOLERANCE = 1e-5
+#: Coarsest level of the constrained stage [segments], and its L-BFGS tolerance.
+COARSE_LEVEL_SEGMENTS = 10
+COARSE_LEVEL_TOLERANCE = 1e-5
 
 
 @dataclass(frozen=True)
@@ -96,13 +98,13 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         If set, count only threats within this distance of each segment [m]; the pairs
         are re-picked whenever the path has moved a quarter of it.
     max_iterations : int
-        L-BFGS-B iteration limit of the unconstrained run.
+        L-BFGS iteration limit of the unconstrained run.
     tolerance : float
         Stop when an iteration lowers J by less than this fraction; 1e-6 put J within
         0.05 % of the yardstick on the bundled scenarios at a tenth of the iterations full
         convergence takes.
     constrained_iterations : int
-        L-BFGS-B iteration limit of each augmented Lagrangian round.
+        L-BFGS iteration limit of each augmented Lagrangian round.
     constrained_only : bool
         Skip the box-only run when the start meets the limits (a warm start near the
         constrained optimum: the box-only run would leave it and the rounds come back).
@@ -117,115 +119,173 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     n = len(x)
     if n < 3:
         return OptimisationResult(x, 0, 0, 0)
-    j_l0 = float(np.linalg.norm(np.diff(x, axis=0), axis=1).sum()) or 1.0
-    spring_unit = (1.0 - w) * (n - 1) / j_l0
-    bounds = None
-    floor = -np.inf if box is None else float(box.lo[2])
-    if box is not None:
-        lo = box.lo.copy()
-        lo[2] = min(lo[2] + limits.min_altitude_m, box.hi[2])
-        bounds = [(a, b) for _ in range(n - 2) for a, b in zip(lo, box.hi)]
-        x[1:-1] = np.clip(x[1:-1], lo, box.hi)
-    ends = (x[0].copy(), x[-1].copy())
-    state = {'pairs': None, 'scale': None, 'spring': SPACING_WEIGHT * spring_unit,
-             'even': 0.0}
-    positions, intensities = threats.positions, threats.intensities
-
-    def pick_pairs(p: NDArray) -> None:
-        if cutoff is not None:
-            seg, thr, _ = threats.near_pairs(p[:-1], p[1:], cutoff)
-            state['pairs'] = (seg, thr)
-
-    def full(z: NDArray) -> NDArray:
-        return np.vstack([ends[0], z.reshape(-1, 3), ends[1]])
-
-    def objective(z: NDArray) -> tuple[float, NDArray]:
-        p = full(z)
-        j, g = cost_gradient(p, positions, intensities, w, state['pairs'])
-        d = np.diff(p, axis=0)
-        spring = state['spring']
-        j += spring * float(np.sum(d * d))
-        g[:-1] -= 2.0 * spring * d
-        g[1:] += 2.0 * spring * d
-        even = state['even']
-        if even > 0.0:
-            # m Var(segment length) = sum l^2 - (sum l)^2 / m: spreads the vertices evenly
-            # without the pull towards a shorter path a plain spring has.
-            ln = np.sqrt(np.einsum('ik,ik->i', d, d))
-            mean = float(ln.sum()) / len(ln)
-            j += even * float(ln @ ln - mean * mean * len(ln))
-            gd = 2.0 * even * d * (1.0 - mean / np.where(ln > 0, ln, np.inf))[:, None]
-            g[:-1] -= gd
-            g[1:] += gd
-        if not np.isfinite(j):
-            return 1e300, np.zeros_like(z)
-        if state['scale'] is None:
-            # Dimensionless objective: the tolerances then mean the same for every scenario.
-            state['scale'] = max(abs(j), 1e-12)
-        return j / state['scale'], g[1:-1].reshape(-1) / state['scale']
-
-    def run(fun, z0: NDArray, maxiter: int) -> tuple[NDArray, int, int]:
-        res = minimize(fun, z0, jac=True, method='L-BFGS-B', bounds=bounds,
-                       options={'maxiter': maxiter, 'ftol': tolerance, 'gtol': 1e-7,
-                                'maxcor': 20})
-        return res.x, int(res.nit), int(res.nfev)
-
-    iterations = evaluations = rounds = 0
-    # With a cut-off the near threats are those of the path where they were picked; a path
-    # that has moved far since may have flown towards threats it does not see, so re-pick
-    # and continue until it stays within a quarter of the cut-off of the last pick.
+    stats = _Stats()
+    level = _Level(x, threats, w, box, limits, cutoff, tolerance, stats)
+    x = level.clip(x)
     skip = (constrained_only and limits.any_constraint
-            and check_limits(x, limits, floor).feasible)
-    for _ in range(0 if skip else MAX_PAIR_ROUNDS if cutoff is not None else 1):
-        pick_pairs(x)
-        state['scale'] = None
-        z, nit, nfev = run(objective, x[1:-1].reshape(-1), max_iterations)
-        iterations, evaluations, rounds = iterations + nit, evaluations + nfev, rounds + 1
-        moved = full(z)
-        shift = float(np.max(np.linalg.norm(moved - x, axis=1)))
-        x = moved
-        if cutoff is None or shift < 0.25 * cutoff:
-            break
-    if not skip and (not limits.any_constraint or check_limits(x, limits, floor).feasible):
-        return OptimisationResult(x, iterations, evaluations, rounds)
-
-    # Equal spacing first: the constraint gradients grow as 1 / segment length, and the
-    # unconstrained optimum bunches vertices at its corners.
+            and check_limits(x, limits, level.floor).feasible)
     if not skip:
+        x = level.unconstrained(x, max_iterations)
+        if not limits.any_constraint or check_limits(x, limits, level.floor).feasible:
+            return stats.result(x, False)
+        # Equal spacing first: the constraint gradients grow as 1 / segment length, and
+        # the unconstrained optimum bunches vertices at its corners.
         x = resample(x, n - 1)
-    pick_pairs(x)
-    state['even'] = EVEN_SPACING_WEIGHT * spring_unit
-    aim = limits.tightened(ANGLE_MARGIN_DEG, RADIUS_MARGIN)
-    term = LimitTerm(aim, n)
-    lam = np.zeros(term.rows)
-    mu = PENALTY_START
-    prev_violation, prev_f = np.inf, np.inf
-
-    def lagrangian(z: NDArray) -> tuple[float, NDArray]:
-        f, g = objective(z)
-        if f >= 1e300:
-            return f, g
-        val, grad_c = term.penalty(full(z), lam, mu)
-        return f + val, g + grad_c[1:-1].reshape(-1)
-
-    best = (objective(x[1:-1].reshape(-1))[0], x) if skip else None
-    for _ in range(MAX_OUTER):
-        z, nit, nfev = run(lagrangian, x[1:-1].reshape(-1), constrained_iterations)
-        iterations, evaluations, rounds = iterations + nit, evaluations + nfev, rounds + 1
-        x = full(z)
-        c = term.values(x)
-        violation = float(np.max(-c, initial=0.0))
-        lam = np.maximum(0.0, lam - mu * c)
-        f = objective(z)[0]
-        feasible = check_limits(x, limits, floor).feasible
-        if feasible and (best is None or f < best[0]):
-            best = (f, x)
-        if feasible and abs(prev_f - f) <= OUTER_TOLERANCE * max(abs(f), 1.0):
-            break
-        if violation > 0.25 * prev_violation:
-            mu *= PENALTY_GROWTH
-        prev_violation, prev_f = violation, f
+    # Coarse to fine: the rounds at half the segments (and half of that, ...) find the
+    # constrained basin and its multipliers for a tenth of the evaluations, and the fine
+    # level starts next to its answer (measured in bench/results/profile_*.txt).
+    counts = [n - 1]
+    while counts[-1] // 2 >= COARSE_LEVEL_SEGMENTS and not skip:
+        counts.append(counts[-1] // 2)
+    lam, mu, best = None, PENALTY_START, None
+    for count in reversed(counts):
+        finest = count == n - 1
+        path = resample(x, count)
+        lvl = level if finest else _Level(path, threats, w, box, limits, cutoff,
+                                          COARSE_LEVEL_TOLERANCE, stats)
+        x, lam, _, best = lvl.constrained(path, lam, mu, constrained_iterations,
+                                           keep_start=skip and finest)
     if best is not None:
-        return OptimisationResult(best[1], iterations, evaluations, rounds, True)
+        return stats.result(best, True)
     # Stalled short of feasibility: the caller repairs (methods.repair) or reports.
-    return OptimisationResult(x, iterations, evaluations, rounds, True)
+    return stats.result(x, True)
+
+
+class _Stats:
+    """Iterations, evaluations and runs over every level of one minimisation."""
+
+    def __init__(self) -> None:
+        self.iterations = self.evaluations = self.rounds = 0
+
+    def add(self, nit: int, nfev: int) -> None:
+        self.iterations += nit
+        self.evaluations += nfev
+        self.rounds += 1
+
+    def result(self, x: NDArray, constrained: bool) -> OptimisationResult:
+        return OptimisationResult(x, self.iterations, self.evaluations, self.rounds,
+                                  constrained)
+
+
+class _Level:
+    """The minimisation at one vertex count: bounds, terms, pairs and the L-BFGS runs."""
+
+    def __init__(self, x: NDArray, threats: ThreatField, w: float, box: Box | None,
+                 limits: FlightLimits, cutoff: float | None, tolerance: float,
+                 stats: _Stats) -> None:
+        n = self.n = len(x)
+        self.threats, self.w, self.limits, self.cutoff = threats, float(w), limits, cutoff
+        self.tolerance, self.stats = tolerance, stats
+        j_l0 = float(np.linalg.norm(np.diff(x, axis=0), axis=1).sum()) or 1.0
+        self.spring_unit = (1.0 - w) * (n - 1) / j_l0
+        self.spring = SPACING_WEIGHT * self.spring_unit
+        self.floor = -np.inf if box is None else float(box.lo[2])
+        lo = np.full((n, 3), -np.inf)
+        hi = np.full((n, 3), np.inf)
+        if box is not None:
+            low = box.lo.copy()
+            low[2] = min(low[2] + limits.min_altitude_m, box.hi[2])
+            lo[1:-1], hi[1:-1] = low, box.hi
+        # The ends are variables with equal bounds: they never move.
+        lo[0] = hi[0] = x[0]
+        lo[-1] = hi[-1] = x[-1]
+        self.lo, self.hi = lo, hi
+        self.positions = _frozen(threats.positions if len(threats) else np.zeros((0, 3)))
+        self.intensities = _frozen(threats.intensities)
+        self.pairs = (_NO_PAIRS, _NO_PAIRS, self.positions)
+        self._off = (np.zeros(7), np.zeros(0), np.zeros((n, 3)))
+
+    def clip(self, x: NDArray) -> NDArray:
+        """The path with its interior vertices moved into the bounds."""
+        return np.clip(x, self.lo, self.hi)
+
+    def pick_pairs(self, p: NDArray) -> None:
+        """Count the threats within the cut-off of p's segments (all without one)."""
+        if self.cutoff is None:
+            return
+        seg, thr, _ = self.threats.near_pairs(p[:-1], p[1:], self.cutoff)
+        if len(seg) == 0:
+            # No threat near: count none (an empty pair list would mean every pair).
+            self.pairs = (_NO_PAIRS, _NO_PAIRS, _NO_THREATS)
+        else:
+            self.pairs = (np.ascontiguousarray(seg, np.int64),
+                          np.ascontiguousarray(thr, np.int64), self.positions)
+
+    def value(self, p: NDArray, even: float, scale: float = 1.0) -> float:
+        """The objective without the limit term: J + spacing terms, over scale."""
+        grad = np.zeros(3 * self.n)
+        return float(_objective(np.ascontiguousarray(p, float).reshape(-1), self.n,
+                                self.pairs[2], self.intensities, self.w, self.pairs[0],
+                                self.pairs[1], _FROZEN_C2, _FROZEN_C3, self.spring, even,
+                                scale, self._off[0], self._off[1], 1.0, self._off[1],
+                                self._off[2], grad))
+
+    def run(self, p: NDArray, even: float, scale: float, maxiter: int,
+            term: LimitTerm | None = None, lam: NDArray | None = None,
+            mu: float = 1.0) -> NDArray:
+        """One L-BFGS run from p; the minimiser, (n, 3)."""
+        if term is None:
+            lim, lam, gbuf, pgrad = self._off[0], self._off[1], self._off[1], self._off[2]
+        else:
+            lim, gbuf, pgrad = term.kernel_args(), np.zeros(term.rows), np.zeros((self.n, 3))
+        z, _, nit, nfev = minimise(
+            np.ascontiguousarray(p, float).reshape(-1), self.lo.reshape(-1),
+            self.hi.reshape(-1), self.pairs[2], self.intensities, self.w, self.pairs[:2],
+            _FROZEN_C2, _FROZEN_C3, self.spring, even, scale, lim, lam, mu, gbuf, pgrad,
+            maxiter, self.tolerance)
+        self.stats.add(nit, nfev)
+        return z.reshape(self.n, 3)
+
+    def unconstrained(self, x: NDArray, maxiter: int) -> NDArray:
+        """Least J within the bounds alone (re-picking the pairs under a cut-off)."""
+        # With a cut-off the near threats are those of the path where they were picked; a
+        # path that has moved far since may have flown towards threats it does not see,
+        # so re-pick and continue until it stays within a quarter of the cut-off.
+        for _ in range(MAX_PAIR_ROUNDS if self.cutoff is not None else 1):
+            self.pick_pairs(x)
+            # Dimensionless objective: the tolerances then mean the same everywhere.
+            moved = self.run(x, 0.0, _scale(self.value(x, 0.0)), maxiter)
+            shift = float(np.max(np.linalg.norm(moved - x, axis=1)))
+            x = moved
+            if self.cutoff is None or shift < 0.25 * self.cutoff:
+                break
+        return x
+
+    def constrained(self, x: NDArray, lam: NDArray | None, mu: float, maxiter: int,
+                    keep_start: bool = False) -> tuple:
+        """Augmented Lagrangian rounds from x (multipliers lam of a coarser level or None).
+
+        Returns ``(x, lam, mu, best)``: the last iterate, its multipliers and penalty
+        (for the next finer level) and the least-objective feasible iterate or None.
+        """
+        x = self.clip(x)
+        self.pick_pairs(x)
+        even = EVEN_SPACING_WEIGHT * self.spring_unit
+        scale = _scale(self.value(x, even))
+        term = LimitTerm(self.limits.tightened(ANGLE_MARGIN_DEG, RADIUS_MARGIN), self.n)
+        lam = np.zeros(term.rows) if lam is None else term.transfer(lam)
+        prev_violation, prev_f = np.inf, np.inf
+        best = (self.value(x, even, scale), x) if keep_start else None
+        for _ in range(MAX_OUTER):
+            x = self.run(x, even, scale, maxiter, term, lam, mu)
+            c = term.values(x)
+            violation = float(np.max(-c, initial=0.0))
+            lam = np.maximum(0.0, lam - mu * c)
+            f = self.value(x, even, scale)
+            feasible = check_limits(x, self.limits, self.floor).feasible
+            if feasible and (best is None or f < best[0]):
+                best = (f, x)
+            if feasible and abs(prev_f - f) <= OUTER_TOLERANCE * max(abs(f), 1.0):
+                break
+            if violation > 0.25 * prev_violation:
+                mu *= PENALTY_GROWTH
+            prev_violation, prev_f = violation, f
+        return x, (term, lam), mu, None if best is None else best[1]
+
+
+_NO_THREATS = _frozen(np.zeros((0, 3)))
+
+
+def _scale(value: float) -> float:
+    """Objective scale: its value at the start (finite, positive)."""
+    return max(abs(value), 1e-12) if np.isfinite(value) and value < 1e299 else 1.0
