@@ -27,9 +27,9 @@ except ImportError:  # pragma: no cover - numba is in install_requires
             return args[0]
         return lambda fn: fn
 
-from threat_planner.core.cost import _C2, _C3, _SERIES_LIMIT, CONTACT_DISTANCE
+from threat_planner.core.cost import _C2, _C3, _SERIES_LIMIT, CONTACT_DISTANCE, Cost
 
-__all__ = ['HAVE_NUMBA', 'cost_gradient', 'warm_up']
+__all__ = ['HAVE_NUMBA', 'cost_gradient', 'path_cost', 'segment_costs', 'warm_up']
 
 _PI = math.pi
 
@@ -140,6 +140,46 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
     return w * j_r + (1.0 - w) * j_l
 
 
+@njit(cache=True)
+def _segment_costs(a, b, positions, f, seg, thr, c2, c3, out):
+    """J_R of each segment into out, over the given pairs; seg empty means all pairs."""
+    n_seg = a.shape[0]
+    n_thr = positions.shape[0]
+    dense = seg.shape[0] == 0
+    n_pairs = n_seg * n_thr if dense else seg.shape[0]
+    out[:] = 0.0
+    for k in range(n_pairs):
+        if dense:
+            s = k // n_thr
+            i = k - s * n_thr
+        else:
+            s = seg[k]
+            i = thr[k]
+        dx = b[s, 0] - a[s, 0]
+        dy = b[s, 1] - a[s, 1]
+        dz = b[s, 2] - a[s, 2]
+        ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if ln == 0:
+            continue
+        ux, uy, uz = dx / ln, dy / ln, dz / ln
+        ex = a[s, 0] - positions[i, 0]
+        ey = a[s, 1] - positions[i, 1]
+        ez = a[s, 2] - positions[i, 2]
+        t1 = ex * ux + ey * uy + ez * uz
+        t2 = t1 + ln
+        px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
+        h = math.sqrt(px * px + py * py + pz * pz)
+        if h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE and t2 >= -CONTACT_DISTANCE:
+            out[s] = math.inf
+            continue
+        ca, r2a, _ = _split(t1, h, c2, c3)
+        cb, r2b, _ = _split(t2, h, c2, c3)
+        i2 = r2b - r2a
+        if cb != ca:
+            i2 += (cb - ca) * (_PI / 4.0) / h ** 3
+        out[s] += f[i] * i2
+
+
 _NO_PAIRS = np.zeros(0, np.int64)
 
 
@@ -197,9 +237,57 @@ def cost_gradient(points: NDArray, positions: NDArray, intensities: NDArray, w: 
 _FROZEN_C2, _FROZEN_C3 = _frozen(_C2), _frozen(_C3)
 
 
+def segment_costs(a: NDArray, b: NDArray, positions: NDArray, intensities: NDArray,
+                  pairs: tuple[NDArray, NDArray] | None = None) -> NDArray:
+    """J_R of each segment (eq. 17, our convention), as :mod:`.cost`'s, compiled.
+
+    Parameters
+    ----------
+    a, b : ndarray
+        Segment starts and ends, (S, 3) [m].
+    positions : ndarray
+        Threat positions, (N, 3) [m].
+    intensities : ndarray
+        Threat intensities F, (N,).
+    pairs : tuple of ndarray, optional
+        ``(segment_index, threat_index)`` restricting the sum; all pairs if None.
+
+    Returns
+    -------
+    ndarray
+        (S,) threat costs; inf where a segment hits a threat.
+
+    """
+    a = np.ascontiguousarray(a, float)
+    out = np.zeros(len(a))
+    if len(a) == 0 or len(positions) == 0:
+        return out
+    if pairs is None:
+        seg = thr = _NO_PAIRS
+    else:
+        if len(pairs[0]) == 0:
+            return out
+        seg = np.ascontiguousarray(pairs[0], np.int64)
+        thr = np.ascontiguousarray(pairs[1], np.int64)
+    _segment_costs(a, np.ascontiguousarray(b, float), _frozen(positions),
+                   _frozen(intensities), seg, thr, _FROZEN_C2, _FROZEN_C3, out)
+    return out
+
+
+def path_cost(points: NDArray, positions: NDArray, intensities: NDArray, w: float) -> Cost:
+    """Cost of a polyline as :func:`.cost.path_cost` (the same closed form), compiled."""
+    points = np.ascontiguousarray(points, float)
+    j_l = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+    j_r = float(segment_costs(points[:-1], points[1:], positions, intensities).sum())
+    return Cost(w * j_r + (1.0 - w) * j_l, j_l, j_r)
+
+
 def warm_up() -> None:
     """Compile (or load from the cache) every kernel once, on a tiny problem."""
     pts = np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 0.2], [2.0, 1.0, 0.0]])
     cost_gradient(pts, np.array([[1.0, 2.0, 0.0]]), np.array([1.0]), 0.5)
     cost_gradient(pts, np.array([[1.0, 2.0, 0.0]]), np.array([1.0]), 0.5,
+                  (np.array([0, 1]), np.array([0, 0])))
+    segment_costs(pts[:-1], pts[1:], np.array([[1.0, 2.0, 0.0]]), np.array([1.0]))
+    segment_costs(pts[:-1], pts[1:], np.array([[1.0, 2.0, 0.0]]), np.array([1.0]),
                   (np.array([0, 1]), np.array([0, 0])))

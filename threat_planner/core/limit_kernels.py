@@ -14,12 +14,75 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from threat_planner.core.kernels import njit
-from threat_planner.core.limits import FlightLimits
+from typing import TYPE_CHECKING
 
-__all__ = ['LimitTerm']
+from threat_planner.core.kernels import njit
+
+if TYPE_CHECKING:  # limits imports measure() from here
+    from threat_planner.core.limits import FlightLimits
+
+__all__ = ['LimitTerm', 'measure']
 
 _TINY = 1e-300
+#: Segments shorter than this fraction of the longest (or of 1 m) count as zero length.
+DEGENERATE = 1e-12
+
+
+@njit(cache=True)
+def _measure(points, floor_z):
+    """Steepest climb and dive [deg], least turn radius [m], lowest interior altitude [m]."""
+    n = points.shape[0] - 1
+    climb = -90.0
+    dive = -90.0
+    longest = 1.0
+    for s in range(n):
+        dx = points[s + 1, 0] - points[s, 0]
+        dy = points[s + 1, 1] - points[s, 1]
+        dz = points[s + 1, 2] - points[s, 2]
+        ang = math.degrees(math.atan2(dz, math.hypot(dx, dy)))
+        climb = max(climb, ang)
+        dive = max(dive, -ang)
+        longest = max(longest, math.sqrt(dx * dx + dy * dy + dz * dz))
+    # The circle through each kept vertex and its kept neighbours: a vertex at the end of
+    # a zero-length segment is skipped over.
+    keep = np.empty(n + 1, np.int64)
+    m = 1
+    keep[0] = 0
+    for s in range(n):
+        d = points[s + 1] - points[s]
+        if math.sqrt(d @ d) > DEGENERATE * longest:
+            keep[m] = s + 1
+            m += 1
+    radius = math.inf
+    for k in range(1, m - 1):
+        a = points[keep[k]] - points[keep[k - 1]]
+        b = points[keep[k + 1]] - points[keep[k]]
+        c = a + b
+        la = math.sqrt(a @ a)
+        lb = math.sqrt(b @ b)
+        lc = math.sqrt(c @ c)
+        cx = a[1] * b[2] - a[2] * b[1]
+        cy = a[2] * b[0] - a[0] * b[2]
+        cz = a[0] * b[1] - a[1] * b[0]
+        cross = math.sqrt(cx * cx + cy * cy + cz * cz)
+        if cross <= 1e-15 * la * lb:
+            # Exactly collinear: straight on is no turn, straight back a hairpin.
+            r = math.inf if a @ b >= 0 else 0.0
+        else:
+            r = la * lb * lc / (2.0 * cross)
+        radius = min(radius, r)
+    alt = math.inf
+    for i in range(1, n):
+        alt = min(alt, points[i, 2] - floor_z)
+    return climb, dive, radius, alt
+
+
+def measure(points: NDArray, floor_z: float) -> tuple[float, float, float, float]:
+    """``(climb_deg, dive_deg, min_turn_radius_m, min_altitude_m)`` of a path (n+1, 3).
+
+    The definitions of :mod:`.limits` (its module docstring), compiled.
+    """
+    return _measure(np.ascontiguousarray(points, float), float(floor_z))
 
 
 @njit(cache=True)
@@ -205,7 +268,9 @@ class LimitTerm:
 
 def warm_up() -> None:
     """Compile (or load from the cache) the kernels once, on a tiny problem."""
+    from threat_planner.core.limits import FlightLimits
     term = LimitTerm(FlightLimits(30.0, 30.0, 10.0), 4)
     pts = np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 0.9], [2.0, 1.0, 0.0], [3.0, 0.0, 0.5]])
     term.values(pts)
     term.penalty(pts, np.ones(term.rows), 10.0)
+    measure(pts, 0.0)

@@ -29,13 +29,15 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from threat_planner.core.limit_kernels import DEGENERATE, measure
+
 __all__ = ['FlightLimits', 'LimitCheck', 'check_limits', 'climb_angles',
            'constraint_jacobian', 'constraint_values', 'constraint_vjp', 'turn_radii']
 
 #: Slack of the final check, so a path optimised onto a limit is not failed by rounding.
 CHECK_SLACK = 1e-6
 #: Segments shorter than this fraction of the longest count as zero length.
-_DEGENERATE = 1e-12
+_DEGENERATE = DEGENERATE
 
 
 @dataclass(frozen=True)
@@ -191,12 +193,7 @@ def check_limits(points: NDArray, limits: FlightLimits, floor_z: float) -> Limit
     LimitCheck
 
     """
-    pts = np.asarray(points, float)
-    ang = climb_angles(pts)
-    climb = float(ang.max(initial=-90.0))
-    dive = float((-ang).max(initial=-90.0))
-    radius = float(turn_radii(pts).min(initial=np.inf))
-    alt = float((pts[1:-1, 2] - floor_z).min(initial=np.inf))
+    climb, dive, radius, alt = measure(points, floor_z)
     excess = {}
     rel = {}
     if climb > limits.max_climb_deg + CHECK_SLACK:

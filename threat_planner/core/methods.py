@@ -22,7 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from threat_planner.core.config import PlannerConfig
-from threat_planner.core.cost import Cost, path_cost
+from threat_planner.core.cost import Cost
+from threat_planner.core.kernels import path_cost as compiled_cost
 from threat_planner.core.limits import check_limits, FlightLimits, LimitCheck
 from threat_planner.core.optimisation import minimise_cost
 from threat_planner.core.partition import Network
@@ -40,7 +41,7 @@ K_SWEEP = tuple(range(500, 3001, 100))
 COARSE_SEGMENTS = 8
 COARSE_TOLERANCE = 1e-4
 #: Largest (segment, threat) pairs per optimiser evaluation counted in full.
-OPTIMISER_DENSE_PAIRS = 20_000
+OPTIMISER_DENSE_PAIRS = 4_000
 #: Optimiser cut-off beyond that, in typical threat spacings.
 OPTIMISER_CUTOFF_SPACINGS = 3.0
 #: Screened basins refined, best first, until one meets the flight limits ('best').
@@ -98,8 +99,8 @@ class Problem:
         if self.airspace is not None and self.airspace.masking:
             from threat_planner.core.airspace_planning import masked_cost
             return masked_cost(points, self.threats, self.config.w, self.airspace)
-        return path_cost(points, self.threats.positions, self.threats.intensities,
-                         self.config.w)
+        return compiled_cost(points, self.threats.positions, self.threats.intensities,
+                             self.config.w)
 
     @property
     def limits(self) -> FlightLimits:

@@ -128,6 +128,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         x = level.unconstrained(x, max_iterations)
         if not limits.any_constraint or check_limits(x, limits, level.floor).feasible:
             return stats.result(x, False)
+    if not skip:
         # Equal spacing first: the constraint gradients grow as 1 / segment length, and
         # the unconstrained optimum bunches vertices at its corners.
         x = resample(x, n - 1)

@@ -16,7 +16,8 @@ from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from threat_planner.core.cost import pair_threat_costs, segment_threat_costs
+from threat_planner.core.kernels import segment_costs as compiled_costs
+from threat_planner.core.near_kernels import near_segment_costs
 from threat_planner.errors import PlanningError
 from threat_planner.core.partition import Network
 from threat_planner.core.threats import ThreatField
@@ -70,10 +71,9 @@ def segment_costs(a: NDArray, b: NDArray, threats: ThreatField,
         ``(costs (S,), bound (S,))``.
     """
     if radius is None or len(threats) == 0:
-        return (segment_threat_costs(a, b, threats.positions, threats.intensities),
+        return (compiled_costs(a, b, threats.positions, threats.intensities),
                 np.zeros(len(a)))
-    seg, thr, bound = threats.near_pairs(a, b, radius)
-    return pair_threat_costs(a, b, threats.positions, threats.intensities, seg, thr), bound
+    return near_segment_costs(a, b, threats.positions, threats.intensities, radius)
 
 
 def edge_threat_costs(network: Network, threats: ThreatField, box_spacing: float,
