@@ -1,0 +1,166 @@
+"""The compiled kernels agree with the numpy reference they replace on the hot path."""
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from threat_planner.core.cost import (pair_threat_costs, path_cost, segment_threat_costs)
+from threat_planner.core.kernels import (_FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS,
+                                         path_cost as compiled_path_cost, segment_costs)
+from threat_planner.core.lbfgs import _objective, minimise
+from threat_planner.core.limit_kernels import LimitTerm, measure
+from threat_planner.core.limits import climb_angles, FlightLimits, turn_radii
+from threat_planner.core.near_kernels import near_segment_costs
+from threat_planner.core.threats import ThreatField
+
+
+def _segments(rng, n=300):
+    a = rng.uniform(0, 100, (n, 3))
+    b = a + rng.normal(0, 8, (n, 3))
+    b[::17] = a[::17]                       # zero-length segments cost nothing
+    return a, b
+
+
+def test_segment_costs_match_the_numpy_closed_form():
+    rng = np.random.default_rng(0)
+    a, b = _segments(rng)
+    pos = rng.uniform(0, 100, (200, 3))
+    f = rng.uniform(0.5, 20, 200)
+    pos[0] = 0.3 * a[5] + 0.7 * b[5]        # a threat on segment 5: infinite cost
+    pos[1] = 0.5 * (a[6] + b[6]) + 1e-6     # a near-line threat: the series branch
+    ref = segment_threat_costs(a, b, pos, f)
+    got = segment_costs(a, b, pos, f)
+    assert np.isinf(got[5]) and np.isinf(ref[5])
+    ok = np.isfinite(ref)
+    np.testing.assert_allclose(got[ok], ref[ok], rtol=1e-12)
+    seg = rng.integers(0, len(a), 4000)
+    thr = rng.integers(0, len(pos), 4000)
+    ref = pair_threat_costs(a, b, pos, f, seg, thr)
+    got = segment_costs(a, b, pos, f, (seg, thr))
+    ok = np.isfinite(ref)
+    assert np.array_equal(np.isfinite(got), ok)
+    np.testing.assert_allclose(got[ok], ref[ok], rtol=1e-12)
+
+
+def test_compiled_path_cost_is_the_reference_cost():
+    rng = np.random.default_rng(1)
+    pts = np.cumsum(rng.uniform(0.5, 4, (41, 3)), axis=0)
+    pos, f = rng.uniform(0, 100, (30, 3)), rng.uniform(1, 10, 30)
+    ref, got = path_cost(pts, pos, f, 0.4), compiled_path_cost(pts, pos, f, 0.4)
+    assert got.J == pytest.approx(ref.J, rel=1e-13)
+    assert got.J_R == pytest.approx(ref.J_R, rel=1e-13)
+    assert got.J_L == ref.J_L
+
+
+@pytest.mark.parametrize('layout', ['spread', 'flat', 'one', 'line'])
+def test_grid_cut_off_costs_match_the_tree_query(layout):
+    rng = np.random.default_rng(2)
+    pos = rng.uniform(0, 100, (500, 3))
+    if layout == 'flat':
+        pos[:, 2] = 50.0                    # coplanar threats: one layer of cells
+    elif layout == 'one':
+        pos = pos[:1]
+    elif layout == 'line':
+        pos[:, 1:] = 10.0
+    f = rng.uniform(0.5, 5, len(pos))
+    threats = ThreatField(pos, f)
+    a, b = _segments(rng, 400)
+    radius = 12.0
+    seg, thr, bound = threats.near_pairs(a, b, radius)
+    ref = pair_threat_costs(a, b, pos, f, seg, thr)
+    got, got_bound = near_segment_costs(a, b, pos, f, radius)
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=0.0)
+    np.testing.assert_allclose(got_bound, bound, rtol=1e-12, atol=1e-300)
+
+
+def test_measure_matches_the_limit_definitions():
+    rng = np.random.default_rng(3)
+    for trial in range(600):
+        n = int(rng.integers(2, 12))
+        p = rng.normal(0, 10, (n, 3))
+        if trial % 3 == 0:
+            p[rng.integers(1, n)] = p[rng.integers(0, n)]        # repeated vertex
+        if trial % 5 == 0:                                       # collinear, reversals
+            p = np.cumsum(np.tile([[1.0, 0.0, 0.3]], (n, 1)), 0) * rng.choice([1, -1], (n, 1))
+        ang = climb_angles(p)
+        ref = (ang.max(initial=-90.0), (-ang).max(initial=-90.0),
+               turn_radii(p).min(initial=np.inf), (p[1:-1, 2] - 1.0).min(initial=np.inf))
+        got = measure(p, 1.0)
+        for r, g in zip(ref, got):
+            assert g == pytest.approx(float(r), rel=1e-12, abs=1e-12)
+
+
+def _problem(n=25, with_limits=True):
+    rng = np.random.default_rng(4)
+    s, t = np.array([5.0, 5.0, 10.0]), np.array([95.0, 90.0, 60.0])
+    x = s + np.linspace(0, 1, n + 1)[:, None] * (t - s)
+    x[1:-1] += rng.normal(0, 4, (n - 1, 3))
+    pos = _frozen(rng.uniform(10, 90, (15, 3)))
+    f = _frozen(rng.uniform(5, 50, 15))
+    term = LimitTerm(FlightLimits(20.0, 20.0, 15.0), n + 1) if with_limits else None
+    return x, pos, f, term
+
+
+def test_objective_gradient_matches_finite_differences():
+    x, pos, f, term = _problem()
+    n1 = len(x)
+    lam = np.random.default_rng(5).uniform(0, 0.5, term.rows)
+
+    def value(z):
+        g = np.zeros(3 * n1)
+        v = _objective(z, n1, pos, f, 0.6, _NO_PAIRS, _NO_PAIRS, _FROZEN_C2, _FROZEN_C3,
+                       0.01, 0.5, 80.0, term.kernel_args(), lam, 30.0,
+                       np.zeros(term.rows), np.zeros((n1, 3)), g)
+        return v, g
+
+    z = x.reshape(-1).copy()
+    _, g = value(z)
+    for k in range(3, 3 * n1 - 3, 7):
+        e = np.zeros_like(z)
+        e[k] = 1e-6
+        fd = (value(z + e)[0] - value(z - e)[0]) / 2e-6
+        assert g[k] == pytest.approx(fd, rel=1e-4, abs=1e-7)
+
+
+def test_lbfgs_reaches_scipy_lbfgsb_within_bounds():
+    """Same objective, same bounds: the compiled run ends at scipy's J or lower."""
+    x, pos, f, _ = _problem(with_limits=False)
+    n1 = len(x)
+    lo = np.tile([0.0, 0.0, 20.0], (n1, 1))
+    hi = np.tile([100.0, 100.0, 45.0], (n1, 1))
+    lo[0] = hi[0] = x[0]
+    lo[-1] = hi[-1] = x[-1]
+    off = np.zeros(7), np.zeros(0), np.zeros((n1, 3))
+
+    def fun(z):
+        g = np.zeros(3 * n1)
+        v = _objective(z, n1, pos, f, 0.5, _NO_PAIRS, _NO_PAIRS, _FROZEN_C2, _FROZEN_C3,
+                       0.0, 0.0, 1.0, off[0], off[1], 1.0, off[1], off[2], g)
+        return v, g
+
+    start = np.clip(x, lo, hi).reshape(-1)
+    ref = minimize(fun, start, jac=True, method='L-BFGS-B',
+                   bounds=list(zip(lo.reshape(-1), hi.reshape(-1))),
+                   options={'ftol': 1e-12, 'gtol': 1e-10, 'maxiter': 5000})
+    z, val, nit, nfev = minimise(start, lo.reshape(-1), hi.reshape(-1), pos, f, 0.5,
+                                 (_NO_PAIRS, _NO_PAIRS), _FROZEN_C2, _FROZEN_C3, 0.0, 0.0,
+                                 1.0, off[0], off[1], 1.0, off[1], off[2], 5000, 1e-12)
+    assert nfev >= nit > 0
+    assert val <= ref.fun * (1 + 1e-6)
+    assert np.all(z >= lo.reshape(-1)) and np.all(z <= hi.reshape(-1))
+    assert np.array_equal(z.reshape(n1, 3)[[0, -1]], x[[0, -1]])
+    # Some vertices rest on the ceiling: the bounds were active, not idle.
+    assert np.any(np.isclose(z.reshape(n1, 3)[1:-1, 2], 45.0))
+
+
+def test_multipliers_carry_to_a_finer_path_as_densities():
+    limits = FlightLimits(30.0, 25.0, 10.0)
+    coarse, fine = LimitTerm(limits, 11), LimitTerm(limits, 21)
+    lam = np.concatenate([np.full(10, 0.4), np.linspace(0, 1, 10), np.full(9, 0.2)])
+    out = fine.transfer((coarse, lam))
+    assert out.shape == (fine.rows,)
+    np.testing.assert_allclose(out[:20], 0.2)                 # climb: half per segment
+    assert out[20] == pytest.approx(0.0) and out[39] == pytest.approx(0.5)
+    np.testing.assert_allclose(out[40:], 0.1)                 # radius rows
+    # The total (the integral of the density) is kept.
+    assert out[:20].sum() == pytest.approx(lam[:10].sum())
