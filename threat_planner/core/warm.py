@@ -7,11 +7,12 @@ the box diagonal, and the new start lies within WARM_START_SHIFT of the previous
 then skipped: they depend only on the threats, which barely moved, and their answer was
 the previous path's basin. The previous path from the point nearest the new start is
 refined under the limits. Rule that guards "no worse than a cold plan": the warm start is
-refused (cold plan) when the previous screening's best basin led the second by less than
-WARM_BASIN_MARGIN in J (a 1 % move could swap them) or when the flight limits bound in
-its final minimisation (the screening is limit-free, so under binding limits another basin
-may be better: measured on uniform20_0 at w = 0.5, warm 0.07 % above cold), and the warm
-result is dropped for a cold plan when it breaks a limit the previous plan met.
+refused (cold plan) when the previous plan's basin led the next by less than
+WARM_BASIN_MARGIN in J (a 1 % move could swap them). That lead is the screening's where
+the flight limits did not bind; where they did, the screening (which holds no turn radius)
+says nothing, and the lead is that of the best basin refined under the limits over the
+next distinct one refined under them (none refined: no lead, cold). The warm result is
+dropped for a cold plan when it breaks a limit the previous plan met.
 """
 
 from __future__ import annotations
@@ -87,7 +88,7 @@ def warm_path(previous: object, threats: ThreatField, s: NDArray, t: NDArray, bo
         if shift > WARM_THREAT_SHIFT * diag:
             return None, f'cold: a threat moved {shift:.3g} m'
     if previous.basin_margin == 0.0:
-        return None, 'cold: the flight limits bound the previous plan'
+        return None, 'cold: the flight limits bound the previous plan, no second basin to compare'
     if previous.basin_margin < WARM_BASIN_MARGIN:
         return None, f'cold: basins within {100 * previous.basin_margin:.2g} % of each other'
     k, _, dist = _project(previous.path, s)
