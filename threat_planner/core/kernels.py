@@ -11,16 +11,19 @@ same functions run as plain Python (correct, slow); numba is an install requirem
 
 from __future__ import annotations
 
+from contextlib import AbstractContextManager, nullcontext
 import math
+import threading
 
 import numpy as np
 from numpy.typing import NDArray
 
 try:
-    from numba import njit
+    from numba import njit, prange
     HAVE_NUMBA = True
 except ImportError:  # pragma: no cover - numba is in install_requires
     HAVE_NUMBA = False
+    prange = range
 
     def njit(*args, **kwargs):  # noqa: D103
         if args and callable(args[0]):
@@ -140,44 +143,105 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
     return w * j_r + (1.0 - w) * j_l
 
 
+@njit(cache=True, inline='always')
+def _pair_integral(a, b, s, positions, i, c2, c3):
+    """Integral of ds / d^4 along segment s (a[s] -> b[s]) from threat i; inf on a hit."""
+    dx = b[s, 0] - a[s, 0]
+    dy = b[s, 1] - a[s, 1]
+    dz = b[s, 2] - a[s, 2]
+    ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if ln == 0:
+        return 0.0
+    ux, uy, uz = dx / ln, dy / ln, dz / ln
+    ex = a[s, 0] - positions[i, 0]
+    ey = a[s, 1] - positions[i, 1]
+    ez = a[s, 2] - positions[i, 2]
+    t1 = ex * ux + ey * uy + ez * uz
+    t2 = t1 + ln
+    px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
+    h = math.sqrt(px * px + py * py + pz * pz)
+    if h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE and t2 >= -CONTACT_DISTANCE:
+        return math.inf
+    ca, r2a, _ = _split(t1, h, c2, c3)
+    cb, r2b, _ = _split(t2, h, c2, c3)
+    i2 = r2b - r2a
+    if cb != ca:
+        i2 += (cb - ca) * (_PI / 4.0) / h ** 3
+    return i2
+
+
 @njit(cache=True)
 def _segment_costs(a, b, positions, f, seg, thr, c2, c3, out):
     """J_R of each segment into out, over the given pairs; seg empty means all pairs."""
-    n_seg = a.shape[0]
     n_thr = positions.shape[0]
-    dense = seg.shape[0] == 0
-    n_pairs = n_seg * n_thr if dense else seg.shape[0]
     out[:] = 0.0
-    for k in range(n_pairs):
+    if seg.shape[0] == 0:
+        for s in range(a.shape[0]):
+            for i in range(n_thr):
+                out[s] += f[i] * _pair_integral(a, b, s, positions, i, c2, c3)
+    else:
+        for k in range(seg.shape[0]):
+            out[seg[k]] += f[thr[k]] * _pair_integral(a, b, seg[k], positions, thr[k], c2, c3)
+
+
+@njit(cache=True, parallel=True)
+def _segment_costs_parallel(a, b, positions, f, c2, c3, out):
+    """:func:`_segment_costs` over all pairs, the segments in parallel."""
+    for s in prange(a.shape[0]):
+        total = 0.0
+        for i in range(positions.shape[0]):
+            total += f[i] * _pair_integral(a, b, s, positions, i, c2, c3)
+        out[s] = total
+
+
+#: Pairs per evaluation from which J and its gradient run on several threads (measured:
+#: 8 segments x 1,000 threats 761 -> 456 us, 40 x 1,000 3.6 -> 2.0 ms on 2 cores).
+PARALLEL_PAIRS = 4_000
+#: numba's default (workqueue) threading layer must not be entered by two threads at
+#: once (the plan service and the node may plan concurrently in one process).
+PARALLEL_LOCK = threading.Lock()
+
+
+def parallel_guard(pairs: int) -> AbstractContextManager:
+    """The lock to hold around a compiled call of this many pairs (none below the bar)."""
+    return PARALLEL_LOCK if pairs >= PARALLEL_PAIRS else nullcontext()
+
+
+#: Segment chunks of a parallel evaluation.
+_CHUNKS = 4
+
+
+@njit(cache=True, parallel=True)
+def _kernel_split(points, positions, f, w, seg, thr, c2, c3, grad):
+    """:func:`_kernel` over chunks of segments in parallel; pairs sorted by segment."""
+    n_seg = points.shape[0] - 1
+    chunks = min(_CHUNKS, n_seg)
+    dense = seg.shape[0] == 0
+    sb = np.empty(chunks + 1, np.int64)
+    for c in range(chunks + 1):
+        sb[c] = (n_seg * c) // chunks
+    pb = np.searchsorted(seg, sb) if not dense else sb
+    bufs = np.zeros((chunks, n_seg + 1, 3))
+    vals = np.zeros(chunks)
+    for c in prange(chunks):
+        lo = sb[c]
+        hi = sb[c + 1]
+        sub = points[lo:hi + 1]
+        g = bufs[c, :hi - lo + 1]
         if dense:
-            s = k // n_thr
-            i = k - s * n_thr
+            vals[c] = _kernel(sub, positions, f, w, seg, thr, c2, c3, g)
+        elif pb[c + 1] > pb[c]:
+            vals[c] = _kernel(sub, positions, f, w, seg[pb[c]:pb[c + 1]] - lo,
+                              thr[pb[c]:pb[c + 1]], c2, c3, g)
         else:
-            s = seg[k]
-            i = thr[k]
-        dx = b[s, 0] - a[s, 0]
-        dy = b[s, 1] - a[s, 1]
-        dz = b[s, 2] - a[s, 2]
-        ln = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if ln == 0:
-            continue
-        ux, uy, uz = dx / ln, dy / ln, dz / ln
-        ex = a[s, 0] - positions[i, 0]
-        ey = a[s, 1] - positions[i, 1]
-        ez = a[s, 2] - positions[i, 2]
-        t1 = ex * ux + ey * uy + ez * uz
-        t2 = t1 + ln
-        px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
-        h = math.sqrt(px * px + py * py + pz * pz)
-        if h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE and t2 >= -CONTACT_DISTANCE:
-            out[s] = math.inf
-            continue
-        ca, r2a, _ = _split(t1, h, c2, c3)
-        cb, r2b, _ = _split(t2, h, c2, c3)
-        i2 = r2b - r2a
-        if cb != ca:
-            i2 += (cb - ca) * (_PI / 4.0) / h ** 3
-        out[s] += f[i] * i2
+            # No pair in this chunk: its length only (an empty pair list means all).
+            vals[c] = _kernel(sub, positions[:0], f, w, seg[:0], thr[:0], c2, c3, g)
+    grad[:, :] = 0.0
+    total = 0.0
+    for c in range(chunks):
+        grad[sb[c]:sb[c + 1] + 1] += bufs[c, :sb[c + 1] - sb[c] + 1]
+        total += vals[c]
+    return total
 
 
 _NO_PAIRS = np.zeros(0, np.int64)
@@ -269,8 +333,14 @@ def segment_costs(a: NDArray, b: NDArray, positions: NDArray, intensities: NDArr
             return out
         seg = np.ascontiguousarray(pairs[0], np.int64)
         thr = np.ascontiguousarray(pairs[1], np.int64)
-    _segment_costs(a, np.ascontiguousarray(b, float), _frozen(positions),
-                   _frozen(intensities), seg, thr, _FROZEN_C2, _FROZEN_C3, out)
+    b = np.ascontiguousarray(b, float)
+    if len(seg) == 0 and len(a) * len(positions) >= PARALLEL_PAIRS:
+        with PARALLEL_LOCK:
+            _segment_costs_parallel(a, b, _frozen(positions), _frozen(intensities),
+                                    _FROZEN_C2, _FROZEN_C3, out)
+    else:
+        _segment_costs(a, b, _frozen(positions), _frozen(intensities), seg, thr,
+                       _FROZEN_C2, _FROZEN_C3, out)
     return out
 
 
@@ -291,3 +361,5 @@ def warm_up() -> None:
     segment_costs(pts[:-1], pts[1:], np.array([[1.0, 2.0, 0.0]]), np.array([1.0]))
     segment_costs(pts[:-1], pts[1:], np.array([[1.0, 2.0, 0.0]]), np.array([1.0]),
                   (np.array([0, 1]), np.array([0, 0])))
+    segment_costs(np.zeros((PARALLEL_PAIRS, 3)), np.ones((PARALLEL_PAIRS, 3)),
+                  np.array([[1.0, 2.0, 0.0]]), np.array([1.0]))

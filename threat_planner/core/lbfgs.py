@@ -21,12 +21,11 @@ import math
 
 import numpy as np
 
-from threat_planner.core.kernels import _kernel, njit
+from threat_planner.core.kernels import (_kernel, _kernel_split, njit, parallel_guard,
+                                         PARALLEL_PAIRS)
 from threat_planner.core.limit_kernels import _penalty
 
-__all__ = ['minimise']
-
-LAST_STATUS = [0]
+__all__ = ['minimise', 'objective']
 
 #: Armijo constant and the backtracking factor of the line search.
 _ARMIJO = 1e-4
@@ -40,7 +39,11 @@ def _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale, li
     """Scaled J + spacing terms (+ the limits' PHR term if lim[6]); gradient into grad."""
     p = x.reshape((n1, 3))
     g = grad.reshape((n1, 3))
-    j = _kernel(p, positions, f, w, seg, thr, c2, c3, g)
+    pairs = seg.shape[0] if seg.shape[0] else (n1 - 1) * positions.shape[0]
+    if pairs >= PARALLEL_PAIRS:
+        j = _kernel_split(p, positions, f, w, seg, thr, c2, c3, g)
+    else:
+        j = _kernel(p, positions, f, w, seg, thr, c2, c3, g)
     if not math.isfinite(j):
         grad[:] = 0.0
         return 1e300
@@ -228,6 +231,14 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
     return fx, nit, nfev, status
 
 
+def objective(x, n1, positions, f, w, pairs, c2, c3, spring, even, scale, lim, lam, mu,
+              gbuf, pgrad, grad) -> float:
+    """Run :func:`_objective` (its arguments; ``pairs`` as in :func:`minimise`)."""
+    with parallel_guard(len(pairs[0]) or (n1 - 1) * len(positions)):
+        return float(_objective(x, n1, positions, f, w, pairs[0], pairs[1], c2, c3, spring,
+                                even, scale, lim, lam, mu, gbuf, pgrad, grad))
+
+
 def minimise(x0, lo, hi, positions, f, w, pairs, c2, c3, spring, even, scale, lim, lam, mu,
              gbuf, pgrad, maxiter, ftol, gtol=1e-7, memory=20):
     """Run :func:`_minimise`; returns ``(x, value, iterations, evaluations)``.
@@ -239,9 +250,10 @@ def minimise(x0, lo, hi, positions, f, w, pairs, c2, c3, spring, even, scale, li
     its scratch space.
     """
     out = np.empty_like(x0)
-    val, nit, nfev, status = _minimise(x0, lo, hi, positions, f, float(w), pairs[0], pairs[1], c2,
-                               c3, float(spring), float(even), float(scale), lim, lam,
-                               float(mu), gbuf, pgrad, int(maxiter), float(ftol),
-                               float(gtol), int(memory), out)
-    LAST_STATUS[0] = status
+    with parallel_guard(len(pairs[0]) or (len(x0) // 3 - 1) * len(positions)):
+        val, nit, nfev, _ = _minimise(x0, lo, hi, positions, f, float(w), pairs[0],
+                                      pairs[1], c2, c3, float(spring), float(even),
+                                      float(scale), lim, lam, float(mu), gbuf, pgrad,
+                                      int(maxiter), float(ftol), float(gtol), int(memory),
+                                      out)
     return out, float(val), int(nit), int(nfev)

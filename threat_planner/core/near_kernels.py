@@ -13,28 +13,18 @@ the same sums (up to their order), no pair list; the segments run in parallel.
 from __future__ import annotations
 
 import math
-import threading
 
 import numpy as np
 from numpy.typing import NDArray
 
-try:
-    from numba import prange
-except ImportError:  # pragma: no cover - numba is in install_requires
-    prange = range
 
-from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3, _frozen, _split, njit
-from threat_planner.core.cost import CONTACT_DISTANCE
+from threat_planner.core.kernels import (_FROZEN_C2, _FROZEN_C3, _frozen, _pair_integral, njit,
+                                         PARALLEL_LOCK, prange)
 
 __all__ = ['near_segment_costs']
 
 #: Most grid cells per threat: a cut-off far below the spacing would make empty cells.
 _CELLS_PER_THREAT = 8
-
-_PI = math.pi
-#: numba's default (workqueue) threading layer must not be entered by two threads at once
-#: (the plan service and the node may plan concurrently in one process).
-_PARALLEL_LOCK = threading.Lock()
 
 
 @njit(cache=True)
@@ -77,7 +67,6 @@ def _near_costs(a, b, positions, f, radius, origin, cell, dims, start, order, c2
         for k, m in enumerate((mx, my, mz)):
             lo[k] = min(max(int(math.floor((m - reach - origin[k]) / cell)), 0), dims[k] - 1)
             hi[k] = min(max(int(math.floor((m + reach - origin[k]) / cell)), 0), dims[k] - 1)
-        ux, uy, uz = (dx / ln, dy / ln, dz / ln) if ln > 0 else (0.0, 0.0, 0.0)
         total = 0.0
         fsum = 0.0
         for ix in range(lo[0], hi[0] + 1):
@@ -92,25 +81,7 @@ def _near_costs(a, b, positions, f, radius, origin, cell, dims, start, order, c2
                         if qx * qx + qy * qy + qz * qz > reach2:
                             continue
                         fsum += f[i]
-                        if ln == 0:
-                            continue
-                        ex = a[s, 0] - positions[i, 0]
-                        ey = a[s, 1] - positions[i, 1]
-                        ez = a[s, 2] - positions[i, 2]
-                        t1 = ex * ux + ey * uy + ez * uz
-                        t2 = t1 + ln
-                        px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
-                        h = math.sqrt(px * px + py * py + pz * pz)
-                        if (h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE
-                                and t2 >= -CONTACT_DISTANCE):
-                            total = math.inf
-                            continue
-                        ca, r2a, _ = _split(t1, h, c2, c3)
-                        cb, r2b, _ = _split(t2, h, c2, c3)
-                        i2 = r2b - r2a
-                        if cb != ca:
-                            i2 += (cb - ca) * (_PI / 4.0) / h ** 3
-                        total += f[i] * i2
+                        total += f[i] * _pair_integral(a, b, s, positions, i, c2, c3)
         out[s] = total
         near_f[s] = fsum
 
@@ -153,7 +124,7 @@ def near_segment_costs(a: NDArray, b: NDArray, positions: NDArray, intensities: 
                float(np.prod(extent) / (_CELLS_PER_THREAT * len(positions))) ** (1 / 3))
     dims = np.minimum(np.floor(extent / cell).astype(np.int64) + 1, 1 << 20)
     start, order = _bin(positions, origin, cell, dims)
-    with _PARALLEL_LOCK:
+    with PARALLEL_LOCK:
         _near_costs(a, b, positions, _frozen(intensities), float(radius), origin, cell,
                     dims, start, order, _FROZEN_C2, _FROZEN_C3, out, near_f)
     length = np.linalg.norm(b - a, axis=1)

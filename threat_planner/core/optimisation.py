@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS
-from threat_planner.core.lbfgs import _objective, minimise
+from threat_planner.core.lbfgs import minimise, objective
 from threat_planner.core.limit_kernels import LimitTerm
 from threat_planner.core.limits import check_limits, FlightLimits
 from threat_planner.core.smoothing import resample
@@ -221,11 +221,10 @@ class _Level:
     def value(self, p: NDArray, even: float, scale: float = 1.0) -> float:
         """The objective without the limit term: J + spacing terms, over scale."""
         grad = np.zeros(3 * self.n)
-        return float(_objective(np.ascontiguousarray(p, float).reshape(-1), self.n,
-                                self.pairs[2], self.intensities, self.w, self.pairs[0],
-                                self.pairs[1], _FROZEN_C2, _FROZEN_C3, self.spring, even,
-                                scale, self._off[0], self._off[1], 1.0, self._off[1],
-                                self._off[2], grad))
+        return objective(np.ascontiguousarray(p, float).reshape(-1), self.n, self.pairs[2],
+                         self.intensities, self.w, self.pairs[:2], _FROZEN_C2, _FROZEN_C3,
+                         self.spring, even, scale, self._off[0], self._off[1], 1.0,
+                         self._off[1], self._off[2], grad)
 
     def run(self, p: NDArray, even: float, scale: float, maxiter: int,
             term: LimitTerm | None = None, lam: NDArray | None = None,
