@@ -203,7 +203,7 @@ PARALLEL_LOCK = threading.Lock()
 
 
 def parallel_guard(pairs: int) -> AbstractContextManager:
-    """The lock to hold around a compiled call of this many pairs (none below the bar)."""
+    """Return the lock to hold around a compiled call of this many pairs (none below)."""
     return PARALLEL_LOCK if pairs >= PARALLEL_PAIRS else nullcontext()
 
 

@@ -94,7 +94,7 @@ def _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale, li
 
 @njit(cache=True)
 def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale, lim,
-              lam, mu, gbuf, pgrad, maxiter, ftol, gtol, m, out):
+              lam, mu, gbuf, pgrad, maxiter, ftol, gtol, m, max_step, out):
     """Projected L-BFGS from x0 within [lo, hi]; the minimiser into out.
 
     Returns (value, iterations, evaluations).
@@ -176,7 +176,17 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
             for k in range(nv):
                 d[k] /= norm
                 gd += g[k] * d[k]
+        # At most max_step [m] of any vertex per iteration: a longer step can carry a
+        # vertex across a threat's core, which the line search, seeing only the end
+        # point, would take when the penalty outweighs that threat's cost.
         step = 1.0
+        longest = 0.0
+        for k in range(0, nv, 3):
+            longest = max(longest, d[k] * d[k] + d[k + 1] * d[k + 1] + d[k + 2] * d[k + 2])
+        longest = math.sqrt(longest)
+        if longest * step > max_step:
+            step = max_step / longest
+        full_step = step
         accepted = False
         fn = fx
         for _ in range(_MAX_BACKTRACKS):
@@ -224,7 +234,7 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
         # A small decrease after a backtracked step says more about the step than about
         # the minimum: stop on the third in a row, or on one after a full step.
         small = small + 1 if decrease <= ftol else 0
-        if small >= 3 or (decrease <= ftol and step == 1.0):
+        if small >= 3 or (decrease <= ftol and step == full_step):
             status = 0
             break
     out[:] = x
@@ -240,14 +250,14 @@ def objective(x, n1, positions, f, w, pairs, c2, c3, spring, even, scale, lim, l
 
 
 def minimise(x0, lo, hi, positions, f, w, pairs, c2, c3, spring, even, scale, lim, lam, mu,
-             gbuf, pgrad, maxiter, ftol, gtol=1e-7, memory=20):
+             gbuf, pgrad, maxiter, ftol, gtol=1e-7, memory=20, max_step=math.inf):
     """Run :func:`_minimise`; returns ``(x, value, iterations, evaluations)``.
 
     Parameters are those of the objective: ``x0``, ``lo``, ``hi`` flat (3 (n+1),) [m];
     ``pairs`` the (segment, threat) index arrays (empty: all pairs); ``lim`` the limit
     term's (sin climb, sin dive, min radius, climb on, dive on, radius on, term on);
     ``lam``, ``mu`` its multipliers and penalty; ``gbuf`` (rows,) and ``pgrad`` (n+1, 3)
-    its scratch space.
+    its scratch space; ``max_step`` the longest move of a vertex per iteration [m].
     """
     out = np.empty_like(x0)
     with parallel_guard(len(pairs[0]) or (len(x0) // 3 - 1) * len(positions)):
@@ -255,5 +265,5 @@ def minimise(x0, lo, hi, positions, f, w, pairs, c2, c3, spring, even, scale, li
                                       pairs[1], c2, c3, float(spring), float(even),
                                       float(scale), lim, lam, float(mu), gbuf, pgrad,
                                       int(maxiter), float(ftol), float(gtol), int(memory),
-                                      out)
+                                      float(max_step), out)
     return out, float(val), int(nit), int(nfev)

@@ -250,7 +250,7 @@ class LimitTerm:
         return out
 
     def kernel_args(self) -> NDArray:
-        """The term as :func:`threat_planner.core.lbfgs.minimise` takes it, (7,)."""
+        """Return the term as :func:`threat_planner.core.lbfgs.minimise` takes it, (7,)."""
         return np.array([*self.args[:3], *(float(flag) for flag in self.args[3:]), 1.0])
 
     def values(self, points: NDArray) -> NDArray:

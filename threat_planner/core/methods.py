@@ -323,7 +323,7 @@ def _lead(p: Problem, ranked: list[tuple[float, NDArray]]) -> float:
 
 def _refined_margin(p: Problem, best: Candidate, refined: list[Candidate],
                     held_margin: float) -> float:
-    """The warm-start lead of best where the limits bound: 0 unless it is feasible.
+    """Return the warm-start lead of best where the limits bound: 0 unless it is feasible.
 
     The lead under the slope limits of the screening (``held_margin``), and no more than
     the lead over the next distinct basin refined under all the limits: none refined, no

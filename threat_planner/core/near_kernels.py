@@ -29,7 +29,7 @@ _CELLS_PER_THREAT = 8
 
 @njit(cache=True)
 def _bin(positions, origin, cell, dims):
-    """Counting sort of the threats by cell: (start of each cell's run, threat order)."""
+    """Sort the threats by cell: (start of each cell's run, threat order), counting."""
     n = positions.shape[0]
     ncell = dims[0] * dims[1] * dims[2]
     ids = np.empty(n, np.int64)

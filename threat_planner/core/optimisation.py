@@ -47,6 +47,11 @@ OUTER_TOLERANCE = 1e-5
 #: Coarsest level of the constrained stage [segments], and its L-BFGS tolerance.
 COARSE_LEVEL_SEGMENTS = 10
 COARSE_LEVEL_TOLERANCE = 1e-5
+#: Longest move of a vertex per L-BFGS iteration, in box diagonals: longer steps carried
+#: vertices across threats' cores on big300_0 (J 30 to 10^6 times the direct one's).
+MAX_STEP = 0.05
+#: Median threat reach over the typical spacing from which a field counts as crowded.
+CROWDED_REACH = 1.0
 
 
 @dataclass(frozen=True)
@@ -124,13 +129,19 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     x = level.clip(x)
     skip = (constrained_only and limits.any_constraint
             and check_limits(x, limits, level.floor).feasible)
+    # Coarse levels only where the threats' reaches (F^(1/4): where a threat costs as
+    # much per metre as a metre of length) leave room between them: in a crowded field
+    # (big300_0: reach 220 m, spacing 150 m) the coarse rounds ended in basins 3 to 300
+    # times the direct rounds' J.
     counts = [n - 1]
-    while counts[-1] // 2 >= COARSE_LEVEL_SEGMENTS and not skip:
+    while (counts[-1] // 2 >= COARSE_LEVEL_SEGMENTS and not skip
+           and not _crowded(threats, box)):
         counts.append(counts[-1] // 2)
     coarse = len(counts) > 1
     probe = _Level(resample(x, counts[-1]), threats, w, box, limits, cutoff,
                    COARSE_LEVEL_TOLERANCE, stats) if coarse else level
     if not skip:
+        given = x
         # The box-only optimum, at the coarsest level first: the answer where it meets
         # the limits, else the start of the constrained rounds (at 40 segments under
         # binding limits it was dropped after up to 1,700 iterations on 10,000 threats).
@@ -141,6 +152,12 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
             x = level.unconstrained(level.clip(resample(x, n - 1)), max_iterations)
         if not limits.any_constraint or check_limits(x, limits, level.floor).feasible:
             return stats.result(x, False)
+        # The rounds start from whichever breaks the limits less: the box-only optimum
+        # or the given start (a seed screened under the slope limits). From a box-only
+        # optimum with vertical segments the first round traded J for the penalty and
+        # ended beside a threat, J 400x (big300_0, w 0.5).
+        if _violation(given, limits) < _violation(x, limits):
+            x = given
     # Coarse to fine: the rounds at half the segments (and half of that, ...) find the
     # constrained basin and its multipliers for a tenth of the evaluations, and the fine
     # level starts next to its answer (measured in bench/results/profile_*.txt).
@@ -183,6 +200,7 @@ class _Level:
         n = self.n = len(x)
         self.threats, self.w, self.limits, self.cutoff = threats, float(w), limits, cutoff
         self.tolerance, self.stats = tolerance, stats
+        self.max_step = np.inf if box is None else MAX_STEP * box.diagonal
         j_l0 = float(np.linalg.norm(np.diff(x, axis=0), axis=1).sum()) or 1.0
         self.spring_unit = (1.0 - w) * (n - 1) / j_l0
         self.spring = SPACING_WEIGHT * self.spring_unit
@@ -203,7 +221,7 @@ class _Level:
         self._off = (np.zeros(7), np.zeros(0), np.zeros((n, 3)))
 
     def clip(self, x: NDArray) -> NDArray:
-        """The path with its interior vertices moved into the bounds."""
+        """Move the path's interior vertices into the bounds."""
         return np.clip(x, self.lo, self.hi)
 
     def pick_pairs(self, p: NDArray) -> None:
@@ -219,7 +237,7 @@ class _Level:
                           np.ascontiguousarray(thr, np.int64), self.positions)
 
     def value(self, p: NDArray, even: float, scale: float = 1.0) -> float:
-        """The objective without the limit term: J + spacing terms, over scale."""
+        """Evaluate the objective without the limit term: J + spacing terms, over scale."""
         grad = np.zeros(3 * self.n)
         return objective(np.ascontiguousarray(p, float).reshape(-1), self.n, self.pairs[2],
                          self.intensities, self.w, self.pairs[:2], _FROZEN_C2, _FROZEN_C3,
@@ -238,7 +256,7 @@ class _Level:
             np.ascontiguousarray(p, float).reshape(-1), self.lo.reshape(-1),
             self.hi.reshape(-1), self.pairs[2], self.intensities, self.w, self.pairs[:2],
             _FROZEN_C2, _FROZEN_C3, self.spring, even, scale, lim, lam, mu, gbuf, pgrad,
-            maxiter, self.tolerance)
+            maxiter, self.tolerance, max_step=self.max_step)
         self.stats.add(nit, nfev)
         return z.reshape(self.n, 3)
 
@@ -290,6 +308,19 @@ class _Level:
 
 
 _NO_THREATS = _frozen(np.zeros((0, 3)))
+
+
+def _violation(x: NDArray, limits: FlightLimits) -> float:
+    """Largest breach of the limits' smooth constraints (0 where they hold)."""
+    return float(np.max(-LimitTerm(limits, len(x)).values(x), initial=0.0))
+
+
+def _crowded(threats: ThreatField, box: Box | None) -> bool:
+    """Whether the median threat's reach F^(1/4) [m] is CROWDED_REACH of the spacing."""
+    if box is None or len(threats) == 0:
+        return False
+    reach = float(np.median(threats.intensities)) ** 0.25
+    return reach >= CROWDED_REACH * threats.typical_spacing(box)
 
 
 def _scale(value: float) -> float:

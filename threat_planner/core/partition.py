@@ -21,7 +21,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cached_property
 
-import networkx as nx
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree, Delaunay, QhullError
@@ -85,12 +84,14 @@ class Network:
         pairs.sort(axis=1)
         return np.unique(pairs, axis=0)
 
-    def to_networkx(self) -> nx.Graph:
+    def to_networkx(self) -> 'nx.Graph':  # noqa: F821
         """Return the network as a networkx graph (node attr ``pos``, edge attr ``length``).
 
         Returns:
             Undirected graph on node ids 0..M-1.
         """
+        # Imported here: the planner does not need networkx, and it costs ~0.1 s to load.
+        import networkx as nx
         g = nx.Graph()
         g.add_nodes_from((i, {'pos': tuple(p), 'radius': float(r)})
                          for i, (p, r) in enumerate(zip(self.nodes, self.radii)))
