@@ -99,7 +99,7 @@ def test_replay_with_other_settings_reports_the_first_difference(tmp_path):
     text = report.read_text()
     assert "overrides: method='paper'" in text and 'DIFFERS' in text
     # A looser tolerance does not hide a changed node sequence.
-    p = cli('replay', BAGS / 'uniform20.mcap', '--w', '0.3', '--tolerance', '100')
+    p = cli('replay', BAGS / 'uniform20.mcap', '--w', '0.2', '--tolerance', '100')
     assert p.returncode == 1 and 'initial path nodes' in p.stdout
 
 
