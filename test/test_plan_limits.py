@@ -7,7 +7,8 @@ import pytest
 
 from threat_planner.core.config import PlannerConfig as Config
 from threat_planner.core.limits import check_limits, FlightLimits
-from threat_planner.core.methods import Candidate, Clock, Problem, repair
+from threat_planner.core.best import repair
+from threat_planner.core.problem import Candidate, Clock, Problem
 from threat_planner.core.planner import plan, PlannerConfig
 from threat_planner.core.scenario import load_scenario
 from threat_planner.core.settings import PHYSICAL_LIMITS

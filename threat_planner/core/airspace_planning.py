@@ -271,7 +271,7 @@ def minimise_in_airspace(points: NDArray, threats, w: float, box, airspace: Airs
 
 def plan_in_airspace(p) -> 'Candidate':  # noqa: F821 (methods.Candidate, no import cycle)
     """Solve Problem ``p`` with method 'best' inside its airspace (see the module docstring)."""
-    from threat_planner.core.methods import Candidate
+    from threat_planner.core.problem import Candidate
     cfg, threats, air = p.config, p.threats, p.airspace
     box = p.box if cfg.confine_to_box else None
     net = routing_network(p.network, p.box, air, cfg.confine_to_box)

@@ -6,153 +6,25 @@
   pair of K entry and exit nodes spread around S and T as in Fig. 11 (Case 1), the pair of
   least final J kept, then k swept over 500..3000 step 100 for least J among angle-feasible
   paths (Case 3).
-* ``best``: one J-weighted Dijkstra with the start and goal joined to K candidates each,
-  several distinct routes plus the straight line screened by a coarse minimisation of J,
-  then the winner refined by L-BFGS-B on J itself within the box and the physical flight
-  limits (:mod:`.limits`; an augmented Lagrangian where they bind).
+* ``best`` (:mod:`.best`): distinct J-weighted routes, the straight line and box surface
+  routes screened by a coarse minimisation of J, the winners refined on J itself within
+  the box and the physical flight limits.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-import time
-from typing import Callable, Optional
+from typing import Callable
 
 import numpy as np
-from numpy.typing import NDArray
 
-from threat_planner.core.config import PlannerConfig
-from threat_planner.core.cost import Cost
-from threat_planner.core.kernels import path_cost as compiled_cost
-from threat_planner.core.limits import check_limits, FlightLimits, LimitCheck
-from threat_planner.core.optimisation import minimise_cost
-from threat_planner.core.partition import Network
-from threat_planner.core.seeds import surface_routes
-from threat_planner.core.search import (alternative_routes, dijkstra_pairs, EdgeCosts,
-                                        entry_candidates, nearest_nodes, segment_costs)
-from threat_planner.core.smoothing import AngleCheck, check_angles, resample, smooth
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.best import plan_best
+from threat_planner.core.problem import Candidate, Problem, smooth_route
+from threat_planner.core.search import dijkstra_pairs, entry_candidates, nearest_nodes
 
-__all__ = ['METHOD_FUNCTIONS', 'Candidate', 'Clock', 'Problem', 'K_SWEEP']
+__all__ = ['METHOD_FUNCTIONS', 'K_SWEEP']
 
 #: Case 3's k sweep, from the paper: 500 <= k <= 3000 in steps of 100.
 K_SWEEP = tuple(range(500, 3001, 100))
-#: Segments and stopping tolerance of the coarse screening minimisation ('best').
-COARSE_SEGMENTS = 8
-COARSE_TOLERANCE = 1e-4
-#: Largest (segment, threat) pairs per optimiser evaluation counted in full.
-OPTIMISER_DENSE_PAIRS = 4_000
-#: Optimiser cut-off beyond that, in typical threat spacings.
-OPTIMISER_CUTOFF_SPACINGS = 3.0
-#: Screened basins refined, best first, until one meets the flight limits ('best').
-FEASIBILITY_TRIES = 3
-#: Basins refined when the limits bind (the best feasible one kept).
-BOUND_BASINS = 2
-#: Bisection steps of the last-resort repair towards the straight line.
-REPAIR_BISECTIONS = 20
-
-
-class Clock:
-    """Accumulates wall time per named stage."""
-
-    def __init__(self) -> None:
-        self.ms: dict[str, float] = {}
-        self._t0 = time.perf_counter()
-
-    def lap(self, stage: str) -> None:
-        """Charge the time since the previous lap to `stage`."""
-        now = time.perf_counter()
-        self.ms[stage] = self.ms.get(stage, 0.0) + 1e3 * (now - self._t0)
-        self._t0 = now
-
-
-@dataclass
-class Problem:
-    """One planning problem and what the methods share while solving it."""
-
-    threats: ThreatField
-    s: NDArray
-    t: NDArray
-    box: Box
-    config: PlannerConfig
-    network: Network
-    edge_j: Optional[EdgeCosts]
-    clock: Clock
-    progress: Optional[Callable[[int, int], None]] = None
-    candidates: dict[tuple[int, int], float] = field(default_factory=dict)
-    k_sweep: dict[float, float] = field(default_factory=dict)
-    # airspace hook (issue 12): zones and terrain; None plans exactly as before.
-    airspace: Optional['Airspace'] = None  # noqa: F821
-    #: Called with the network route's polyline and its exact cost as soon as the search
-    #: has one, before smoothing and optimisation (a caller that may stop the plan early
-    #: keeps it as the best path so far).
-    on_initial: Optional[Callable[[NDArray, Cost], None]] = None
-
-    def route_found(self, seq: list[int]) -> None:
-        """Hand the route `seq` (S, its nodes, T) to :attr:`on_initial`, if set."""
-        if self.on_initial is not None and seq:
-            points = np.vstack([self.s, self.network.nodes[seq], self.t])
-            self.on_initial(points, self.cost(points))
-
-    def cost(self, points: NDArray) -> Cost:
-        """Exact J of a path through this problem's threats (masked if the terrain masks)."""
-        if self.airspace is not None and self.airspace.masking:
-            from threat_planner.core.airspace_planning import masked_cost
-            return masked_cost(points, self.threats, self.config.w, self.airspace)
-        return compiled_cost(points, self.threats.positions, self.threats.intensities,
-                             self.config.w)
-
-    @property
-    def limits(self) -> FlightLimits:
-        """The physical flight limits in force."""
-        return FlightLimits.of(self.config)
-
-    def check(self, points: NDArray) -> LimitCheck:
-        """Measure a path's climb, dive, turn radius and altitude against the limits."""
-        return check_limits(points, self.limits, float(self.box.lo[2]))
-
-
-@dataclass
-class Candidate:
-    """One path under consideration, from its network route to its final form."""
-
-    seq: list[int]
-    initial: NDArray
-    smoothed: NDArray | None
-    smoothed_cost: Cost | None
-    final: NDArray
-    k: float
-    steps: int
-    converged: bool
-    cost: Cost
-    angles: AngleCheck
-    seed: str = 'route 0'
-    limit_check: Optional[LimitCheck] = None
-    #: Relative J gap between the best and the second-best screened basin ('best').
-    basin_margin: float = float('inf')
-    #: The flight limits bound in the final minimisation ('best').
-    limits_bound: bool = False
-
-
-def _smooth_route(p: Problem, seq: list[int], k: float) -> Candidate:
-    """Smooth one network route with spring coefficient k (paper §3.4)."""
-    cfg = p.config
-    initial = np.vstack([p.s, p.network.nodes[seq], p.t])
-    # Network nodes may sit in the box's margin; the chain starts inside the box.
-    chain = p.box.clip(resample(initial, cfg.n_points))
-    r = smooth(chain, p.threats.positions, p.threats.intensities, k, cfg.damping, cfg.mass,
-               cfg.q, max_steps=cfg.max_smoothing_steps, bounds=(p.box.lo, p.box.hi))
-    pts = r.points
-    c = p.cost(pts)
-    if not np.isfinite(c.J):
-        # The chain came to rest on a threat (pinned there by a wall): the resampled
-        # route itself is the better answer.
-        pts = chain
-        c = p.cost(pts)
-    return Candidate(seq=seq, initial=initial, smoothed=pts, smoothed_cost=c, final=pts, k=k,
-                     steps=r.steps, converged=r.converged, cost=c,
-                     angles=check_angles(pts, cfg.max_pitch_deg, cfg.max_turn_deg),
-                     limit_check=p.check(pts))
 
 
 def _sweep_k(p: Problem, best: Candidate) -> Candidate:
@@ -160,7 +32,7 @@ def _sweep_k(p: Problem, best: Candidate) -> Candidate:
     feasible_best = best if best.angles.feasible else None
     done = len(p.candidates)
     for n_done, k in enumerate(K_SWEEP, 1):
-        cand = _smooth_route(p, best.seq, float(k))
+        cand = smooth_route(p, best.seq, float(k))
         p.k_sweep[float(k)] = cand.cost.J if cand.angles.feasible else float('inf')
         if cand.angles.feasible and (feasible_best is None
                                      or cand.cost.J < feasible_best.cost.J):
@@ -179,7 +51,7 @@ def plan_paper(p: Problem) -> Candidate:
                          np.array([exit_]))
     p.clock.lap('search_ms')
     p.route_found(seq[(entry, exit_)][0])
-    best = _smooth_route(p, seq[(entry, exit_)][0], p.config.k)
+    best = smooth_route(p, seq[(entry, exit_)][0], p.config.k)
     p.clock.lap('smoothing_ms')
     return _sweep_k(p, best) if p.config.auto_k else best
 
@@ -196,7 +68,7 @@ def plan_improved(p: Problem) -> Candidate:
         p.route_found(min(routes.values(), key=lambda route: route[1])[0])
     best = None
     for n_done, (pair, (seq, _)) in enumerate(routes.items(), 1):
-        cand = _smooth_route(p, seq, cfg.k)
+        cand = smooth_route(p, seq, cfg.k)
         p.candidates[pair] = cand.cost.J
         if best is None or cand.cost.J < best.cost.J:
             best = cand
@@ -204,243 +76,6 @@ def plan_improved(p: Problem) -> Candidate:
             p.progress(n_done, len(routes) + len(K_SWEEP))
     p.clock.lap('smoothing_ms')
     return _sweep_k(p, best)
-
-
-def plan_best(p: Problem) -> Candidate:
-    """Distinct J-weighted routes and the straight line screened, the best refined on J."""
-    cfg, net, threats = p.config, p.network, p.threats
-    entries = nearest_nodes(net, p.s, cfg.entry_candidates)
-    exits = nearest_nodes(net, p.t, cfg.entry_candidates)
-    legs_s, _ = segment_costs(np.repeat(p.s[None], len(entries), 0), net.nodes[entries],
-                              threats, p.edge_j.radius)
-    legs_t, _ = segment_costs(net.nodes[exits], np.repeat(p.t[None], len(exits), 0),
-                              threats, p.edge_j.radius)
-    len_s = np.linalg.norm(net.nodes[entries] - p.s, axis=1)
-    len_t = np.linalg.norm(net.nodes[exits] - p.t, axis=1)
-    routes = alternative_routes(net, p.edge_j.weights(net.edge_lengths, cfg.w),
-                                p.edge_j.combine(legs_s, len_s, cfg.w), entries,
-                                p.edge_j.combine(legs_t, len_t, cfg.w), exits, cfg.routes)
-    p.clock.lap('search_ms')
-    p.route_found(routes[0])
-    if not cfg.optimise:
-        best = _smooth_route(p, routes[0], cfg.k)
-        p.clock.lap('smoothing_ms')
-        return best
-    return _optimise_routes(p, routes)
-
-
-def _optimiser_cutoff(segments: int, threats: ThreatField, spacing: float) -> float | None:
-    """Cut-off radius for a minimisation over ``segments`` segments, None to count all.
-
-    Every threat is counted while that costs at most OPTIMISER_DENSE_PAIRS pairs per
-    evaluation. Beyond, far threats are dropped: a much wider radius than the edge costs'
-    because the optimiser follows the gradient, which a cut-off distorts, into places the
-    Dijkstra route never went.
-    """
-    if segments * len(threats) <= OPTIMISER_DENSE_PAIRS:
-        return None
-    return OPTIMISER_CUTOFF_SPACINGS * spacing
-
-
-def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
-    """Screen every route and the straight line coarsely, then refine the lowest-J one.
-
-    Each route lies in its own basin of J (it passes the threats on its own sides); a cheap
-    coarse minimisation of each (box only, no flight limits) tells the basins apart before
-    the fine one runs, under the limits, once (or up to FEASIBILITY_TRIES times when the
-    limits cannot be met in the best basin).
-    """
-    cfg, threats, nodes = p.config, p.threats, p.network.nodes
-    w = cfg.w
-    bounds = p.box if cfg.confine_to_box else None
-    spacing = threats.typical_spacing(p.box)
-    # The straight line is the other natural start, and wins when length dominates.
-    seeds = [(f'route {i}', seq, np.vstack([p.s, nodes[seq], p.t]))
-             for i, seq in enumerate(routes)] + [('straight line', [], np.vstack([p.s, p.t]))]
-    screened = []
-    cutoff = _optimiser_cutoff(COARSE_SEGMENTS, threats, spacing)
-    for name, seq, initial in seeds:
-        coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
-                               cutoff=cutoff, tolerance=COARSE_TOLERANCE).points
-        screened.append((p.cost(coarse).J, name, seq, coarse))
-    # --- issue 11 global search (branch paperfaith): routes along the box's faces and
-    # edges, where dense fields put the in-box optimum, join the screened seeds as they
-    # are: 8 coarse segments would cut the box's corners back into the threats.
-    if cfg.surface_seeds and bounds is not None:
-        screened += [(p.cost(line).J, f'surface route {i}', [], line) for i, line in
-                     enumerate(surface_routes(threats, p.s, p.t, p.box, w))]
-    # --- end of the global-search hook
-    screened.sort(key=lambda item: item[0])
-    # Lead of the best basin over the next distinct one (routes that screened into the
-    # same basin end within 1 % of the diagonal of each other): the warm-start rule.
-    # (Surface routes have their own point counts: compare at the coarse resolution.)
-    margin = _lead(p, [(j, path) for j, _, _, path in screened])
-    order = [(name, seq, coarse) for _, name, seq, coarse in screened]
-    held_margin = 0.0
-    if p.limits.climb_on or p.limits.dive_on:
-        held, held_margin = _slope_screening(p, screened, bounds, cutoff)
-        order = _interleave(order, held)
-    p.clock.lap('screening_ms')
-    best: Candidate | None = None
-    bound, refined = False, []
-    for name, seq, coarse in order[:FEASIBILITY_TRIES]:
-        cand = refine(p, resample(coarse, cfg.n_points), seq or routes[0], name)
-        bound = bound or cand.limits_bound
-        refined.append(cand)
-        if best is None or ((cand.limit_check.feasible, -cand.cost.J)
-                            > (best.limit_check.feasible, -best.cost.J)):
-            best = cand
-        # Where the limits bind, the runner-up basin is refined too (measured: the
-        # constrained optimum of the second basin wins on a third of the bundled cases).
-        feasible = sum(c.limit_check.feasible for c in refined)
-        if best.limit_check.feasible and (feasible >= BOUND_BASINS or not bound):
-            break
-    # The warm-start rule's lead: the screening's where the limits did not bind; where
-    # they did, the screening (which holds no turn radius) says nothing, and the lead is
-    # that of the best refined basin over the next distinct refined one, or none.
-    best.basin_margin = _refined_margin(p, best, refined, held_margin) if bound else margin
-    if not best.limit_check.feasible:
-        best = repair(p, best)
-    p.clock.lap('optimisation_ms')
-    return best
-
-
-def _lead(p: Problem, ranked: list[tuple[float, NDArray]]) -> float:
-    """Relative J lead of the first of ``ranked`` (J, path) over the next distinct basin.
-
-    Paths that end within 1 % of the box diagonal of the first are the same basin; paths
-    are compared at the coarse resolution (surface routes have their own point counts).
-    No distinct runner-up: an infinite lead.
-    """
-    j0, first = ranked[0]
-    lead = resample(first, COARSE_SEGMENTS)
-    for j_other, other in ranked[1:]:
-        if np.max(np.linalg.norm(resample(other, COARSE_SEGMENTS) - lead, axis=1)) \
-                > 0.01 * p.box.diagonal:
-            return j_other / j0 - 1.0 if j0 > 0 else 0.0
-    return float('inf')
-
-
-def _refined_margin(p: Problem, best: Candidate, refined: list[Candidate],
-                    held_margin: float) -> float:
-    """Return the warm-start lead of best where the limits bound: 0 unless it is feasible.
-
-    The lead under the slope limits of the screening (``held_margin``), and no more than
-    the lead over the next distinct basin refined under all the limits: none refined, no
-    lead (measured: where the refined starts all ended in one basin, a cold replan after
-    a 0.5 % move found another 2.4 % lower on uniform20_0 at w = 0.5).
-    """
-    if not best.limit_check.feasible or best.cost.J <= 0:
-        return 0.0
-    others = [(c.cost.J, c.final) for c in refined
-              if c is not best and c.limit_check.feasible]
-    lead = _lead(p, [(best.cost.J, best.final)] + sorted(others, key=lambda o: o[0]))
-    return max(min(held_margin, lead), 0.0) if np.isfinite(lead) else 0.0
-
-
-def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: float | None
-                     ) -> tuple[list[tuple[str, list[int], NDArray]], float]:
-    """Rank the screened seeds again, held to the climb and dive limits, best first.
-
-    The slope limits mean the same at 8 segments as at n_points (the turn radius does
-    not: 8 segments cannot turn on a 10 m circle), so this ranks the basins as flown: a
-    limit-free basin that climbs a wall may lose to one that does not. Seeds the coarse
-    run could not bring within the slopes rank last. Returns the ranking and the lead of
-    its best basin over the next distinct one (:func:`_lead`).
-    """
-    lim = p.limits
-    slopes = FlightLimits(lim.max_climb_deg, lim.max_dive_deg, 0.0, lim.min_altitude_m)
-    floor = float(p.box.lo[2])
-    held = []
-    # Every seed: re-screening only the best 4 lost 10 % J on uniform20_1 at w = 0.8.
-    for _, name, seq, coarse in screened:
-        path = minimise_cost(resample(coarse, COARSE_SEGMENTS), p.threats, p.config.w,
-                             bounds, slopes, cutoff=cutoff,
-                             tolerance=COARSE_TOLERANCE).points
-        ok = check_limits(path, slopes, floor).feasible
-        held.append((not ok, p.cost(path).J, f'{name} (slopes held)', seq, path))
-    held.sort(key=lambda item: item[:2])
-    feasible = [(item[1], item[4]) for item in held if not item[0]]
-    lead = _lead(p, feasible) if feasible else 0.0
-    return [item[2:] for item in held], lead
-
-
-def _interleave(first: list, second: list) -> list:
-    """Alternate two rankings: best of each, then the second of each, ..."""
-    out = []
-    for pair in zip(first, second):
-        out.extend(pair)
-    longer = first if len(first) > len(second) else second
-    return out + longer[len(out) // 2:]
-
-
-def repair(p: Problem, cand: Candidate) -> Candidate:
-    """Return the feasible path nearest an infeasible candidate on its way to the line.
-
-    The last resort of "a feasible path beats any infeasible one": the straight line
-    meets every limit when its own climb does (no turn, one slope, in the box), and the
-    blend line + a (path - line) does for a small enough a; bisection finds the largest
-    feasible a. When the line itself breaks a limit (the goal is too steep above the
-    start) the candidate is returned as it is, reported infeasible with its violation.
-    """
-    n = len(cand.final) - 1
-    line = resample(np.vstack([p.s, p.t]), n)
-    if not p.check(line).feasible:
-        return cand
-    # The path at the line's parameter: equal arc-length steps on both.
-    path = resample(cand.final, n)
-    lo, hi = 0.0, 1.0
-    for _ in range(REPAIR_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        if p.check(line + mid * (path - line)).feasible:
-            lo = mid
-        else:
-            hi = mid
-    pts = line + lo * (path - line)
-    cost = p.cost(pts)
-    cfg = p.config
-    return Candidate(seq=cand.seq, initial=cand.initial, smoothed=None, smoothed_cost=None,
-                     final=pts, k=float('nan'), steps=0, converged=True, cost=cost,
-                     angles=check_angles(pts, cfg.max_pitch_deg, cfg.max_turn_deg),
-                     seed=f'{cand.seed}, repaired ({lo:.3g} of the way from the line)',
-                     limit_check=p.check(pts), basin_margin=cand.basin_margin)
-
-
-def refine(p: Problem, start: NDArray, seq: list[int], name: str,
-           tolerance: float = 1e-6, warm: bool = False) -> Candidate:
-    """Minimise J from a path of n_points segments inside the box and the flight limits.
-
-    Parameters
-    ----------
-    p : Problem
-        The problem.
-    start : ndarray
-        Starting path, (n+1, 3) [m], from S to T.
-    seq : list of int
-        Network route reported as the initial path (the line won: the best route).
-    name : str
-        Seed name reported in PlanResult.seed.
-    tolerance : float
-        Relative J decrease per iteration below which L-BFGS-B stops.
-    warm : bool
-        The start is a previous plan: straight to the constrained rounds if it is feasible.
-
-    Returns
-    -------
-    Candidate
-
-    """
-    cfg = p.config
-    opt = minimise_cost(start, p.threats, cfg.w, p.box if cfg.confine_to_box else None,
-                        p.limits, tolerance=tolerance, constrained_only=warm,
-                        cutoff=_optimiser_cutoff(cfg.n_points, p.threats,
-                                                 p.threats.typical_spacing(p.box)))
-    return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
-                     smoothed=None, smoothed_cost=None, final=opt.points, k=float('nan'),
-                     steps=0, converged=True, cost=p.cost(opt.points),
-                     angles=check_angles(opt.points, cfg.max_pitch_deg, cfg.max_turn_deg),
-                     seed=name, limit_check=p.check(opt.points),
-                     limits_bound=opt.constrained)
 
 
 #: Method name -> the function that solves a Problem with it.

@@ -171,7 +171,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
                                           keep_start=skip and finest)
     if best is not None:
         return stats.result(best, True)
-    # Stalled short of feasibility: the caller repairs (methods.repair) or reports.
+    # Stalled short of feasibility: the caller repairs (best.repair) or reports.
     return stats.result(x, True)
 
 

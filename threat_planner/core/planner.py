@@ -15,8 +15,9 @@ from threadpoolctl import threadpool_limits
 from threat_planner.core.airspace import Airspace
 from threat_planner.core.config import PlannerConfig
 from threat_planner.core.cost import Cost
-from threat_planner.core.methods import Candidate, Clock, K_SWEEP, METHOD_FUNCTIONS, Problem
-from threat_planner.core.methods import refine
+from threat_planner.core.best import refine
+from threat_planner.core.methods import K_SWEEP, METHOD_FUNCTIONS
+from threat_planner.core.problem import Candidate, Clock, Problem
 from threat_planner.core.partition import build_network, paper_network
 from threat_planner.core.result import PlanResult
 from threat_planner.core.search import edge_threat_costs
