@@ -164,3 +164,28 @@ def test_multipliers_carry_to_a_finer_path_as_densities():
     np.testing.assert_allclose(out[40:], 0.1)                 # radius rows
     # The total (the integral of the density) is kept.
     assert out[:20].sum() == pytest.approx(lam[:10].sum())
+
+
+def test_lbfgs_moves_no_vertex_further_than_max_step_per_iteration():
+    x, pos, f, _ = _problem(with_limits=False)
+    n1 = len(x)
+    lo = np.full(3 * n1, -np.inf)
+    hi = np.full(3 * n1, np.inf)
+    lo[:3] = hi[:3] = x[0]
+    lo[-3:] = hi[-3:] = x[-1]
+    off = np.zeros(7), np.zeros(0), np.zeros((n1, 3))
+    start = x.reshape(-1).copy()
+    moved = []
+    for iterations in (1, 2, 3):
+        z, _, nit, _ = minimise(start, lo, hi, pos, f, 0.5, (_NO_PAIRS, _NO_PAIRS),
+                                _FROZEN_C2, _FROZEN_C3, 0.0, 0.0, 1.0, off[0], off[1], 1.0,
+                                off[1], off[2], iterations, 0.0, max_step=0.5)
+        assert nit == iterations
+        moved.append(np.linalg.norm((z - start).reshape(n1, 3), axis=1).max())
+    assert moved[0] <= 0.5 + 1e-12
+    assert all(m <= 0.5 * k + 1e-12 for k, m in enumerate(moved, 1))
+    # Unbounded, the first quasi-Newton steps go further (the cap is what held them).
+    z, _, _, _ = minimise(start, lo, hi, pos, f, 0.5, (_NO_PAIRS, _NO_PAIRS), _FROZEN_C2,
+                          _FROZEN_C3, 0.0, 0.0, 1.0, off[0], off[1], 1.0, off[1], off[2], 3,
+                          0.0)
+    assert np.linalg.norm((z - start).reshape(n1, 3), axis=1).max() > moved[2]

@@ -1,0 +1,147 @@
+"""Cold plans of two checkouts side by side, interleaved case by case, in one run.
+
+Usage (from the repository root)::
+
+    git worktree add /tmp/base <commit>
+    .venv/bin/python bench/run_before_after.py /tmp/base [--out bench/results/before_after.md]
+
+One long-lived worker process per checkout (``PYTHONPATH`` = that checkout) plans the
+bundled 20-threat scenarios at w = 0.2 / 0.5 / 0.8 with the default settings (the flight
+limits on) and with the limits off, and 1,000 / 10,000 threats of
+``bench_tools.scale_problem`` at w 0.5; the two workers take turns on every case, after
+one untimed plan each to load the compiled kernels, so machine load falls on both alike.
+Every J is the checkout's own exact J of its own path; the table gives both and their
+ratio, the times and their ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+import statistics
+import subprocess
+import sys
+import time
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIOS = ['uniform20_0', 'uniform20_1', 'weak20_0', 'strongweak_0', 'clustered_0',
+             'ground_0', 'coplanar_0']
+WS = (0.2, 0.5, 0.8)
+OFF = {'max_climb_deg': 90.0, 'max_dive_deg': 90.0, 'min_turn_radius_m': 0.0}
+
+WORKER = r'''
+import json, sys, time
+sys.path.insert(0, BENCH)
+import bench_tools as bt
+from threat_planner import load_scenario, plan, PlannerConfig
+print(json.dumps({'ready': True}), flush=True)
+for line in sys.stdin:
+    case = json.loads(line)
+    if 'threats' in case:
+        threats, s, t, box = bt.scale_problem(case['threats'])
+    else:
+        sc = load_scenario(case['file'])
+        threats, s, t, box = sc.threats, sc.start, sc.goal, sc.box
+    cfg = PlannerConfig(w=case['w'], **case['limits'])
+    t0 = time.perf_counter()
+    r = plan(threats, s, t, box, cfg)
+    ms = 1e3 * (time.perf_counter() - t0)
+    print(json.dumps({'ms': ms, 'J': r.cost.J, 'feasible': bool(r.feasible)}), flush=True)
+'''
+
+
+class Worker:
+    """A planning process on one checkout."""
+
+    def __init__(self, tree: Path) -> None:
+        env = dict(os.environ, PYTHONPATH=str(tree))
+        code = WORKER.replace('BENCH', repr(str(ROOT / 'bench')))
+        self.proc = subprocess.Popen([sys.executable, '-c', code], env=env, text=True,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        json.loads(self.proc.stdout.readline())
+
+    def plan(self, case: dict) -> dict:
+        self.proc.stdin.write(json.dumps(case) + '\n')
+        self.proc.stdin.flush()
+        return json.loads(self.proc.stdout.readline())
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait(timeout=60)
+
+
+def cases() -> list[dict]:
+    """Every case, in run order."""
+    out = []
+    for name in SCENARIOS:
+        for w in WS:
+            for label, lim in (('on', {}), ('off', OFF)):
+                out.append({'name': f'{name}@{w}', 'limits_label': label, 'w': w,
+                            'limits': lim,
+                            'file': str(ROOT / 'test' / 'data' / f'{name}.yaml')})
+    for n in (1000, 10000):
+        out.append({'name': f'{n} threats', 'limits_label': 'on', 'w': 0.5, 'limits': {},
+                    'threats': n})
+    return out
+
+
+def main() -> None:
+    """Run both checkouts and write the table."""
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('base', type=Path, help='the other checkout (the "before")')
+    ap.add_argument('--out', type=Path, default=ROOT / 'bench' / 'results' / 'before_after.md')
+    args = ap.parse_args()
+    base_commit = subprocess.run(['git', '-C', str(args.base), 'rev-parse', '--short', 'HEAD'],
+                                 capture_output=True, text=True).stdout.strip()
+    head_commit = subprocess.run(['git', '-C', str(ROOT), 'rev-parse', '--short', 'HEAD'],
+                                 capture_output=True, text=True).stdout.strip()
+    before, after = Worker(args.base), Worker(ROOT)
+    warm = cases()[0]
+    before.plan(warm)
+    after.plan(warm)
+    rows = []
+    for i, case in enumerate(cases()):
+        # Alternate who goes first, so neither always plans on the warmer cache.
+        pair = (before, after) if i % 2 == 0 else (after, before)
+        got = {id(w): w.plan(case) for w in pair}
+        b, a = got[id(before)], got[id(after)]
+        rows.append((case, b, a))
+        print(case['name'], case['limits_label'], f"{b['ms']:.0f} -> {a['ms']:.0f} ms",
+              f"J {b['J']:.4f} -> {a['J']:.4f}", flush=True)
+    before.close()
+    after.close()
+    lines = [
+        '# Before and after, side by side',
+        '',
+        f'Written by `bench/run_before_after.py` on {time.strftime("%Y-%m-%d %H:%M")}: '
+        f'before = `{base_commit}`, after = `{head_commit}`, one worker process each, taking '
+        'turns on every case (one plan per cell, kernels loaded beforehand) on a 2-core '
+        'machine shared with other jobs: read the ratios.',
+        '',
+        '| case | limits | before ms | after ms | after/before time | before J | after J | '
+        'after/before J | feasible before/after |',
+        '|---|---|---:|---:|---:|---:|---:|---:|---|',
+    ]
+    for case, b, a in rows:
+        lines.append(f"| {case['name']} | {case['limits_label']} | {b['ms']:.0f} | "
+                     f"{a['ms']:.0f} | {a['ms'] / b['ms']:.3f} | {b['J']:.4f} | "
+                     f"{a['J']:.4f} | {a['J'] / b['J']:.5f} | {b['feasible']}/{a['feasible']} |")
+    lines.append('')
+    for label in ('on', 'off'):
+        sel = [(b, a) for c, b, a in rows if c['limits_label'] == label and 'file' in c]
+        lines.append(
+            f'* 20 threats, limits {label} ({len(sel)} cases): median time '
+            f"{statistics.median(b['ms'] for b, _ in sel):.0f} -> "
+            f"{statistics.median(a['ms'] for _, a in sel):.0f} ms, worst "
+            f"{max(b['ms'] for b, _ in sel):.0f} -> {max(a['ms'] for _, a in sel):.0f} ms; "
+            f"J after/before median {statistics.median(a['J'] / b['J'] for b, a in sel):.5f}, "
+            f"best {min(a['J'] / b['J'] for b, a in sel):.5f}, "
+            f"worst {max(a['J'] / b['J'] for b, a in sel):.5f}")
+    args.out.write_text('\n'.join(lines) + '\n')
+    print(f'wrote {args.out}')
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,60 @@
+"""The rules of method best that decide warm starts and coarse levels, on made-up cases."""
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from threat_planner.core.best import _lead, _refined_margin
+from threat_planner.core.optimisation import _crowded
+from threat_planner.core.scenario import load_scenario
+from threat_planner.core.threats import Box
+
+DATA = Path(__file__).resolve().parent / 'data'
+BOX = Box(np.zeros(3), np.full(3, 100.0))
+PROBLEM = SimpleNamespace(box=BOX)
+
+
+def _path(bend):
+    """A path from (0,0,0) to (100,100,50) bent sideways by `bend` [m] in the middle."""
+    t = np.linspace(0.0, 1.0, 9)[:, None]
+    p = t * np.array([100.0, 100.0, 50.0])
+    p[:, 0] += bend * np.sin(np.pi * t[:, 0])
+    return p
+
+
+def _cand(j, bend, feasible=True):
+    return SimpleNamespace(cost=SimpleNamespace(J=j), final=_path(bend),
+                           limit_check=SimpleNamespace(feasible=feasible))
+
+
+def test_lead_is_over_the_next_distinct_basin():
+    # 0.5 m apart is the same basin (1 % of the 173 m diagonal is 1.7 m); 20 m is not.
+    ranked = [(100.0, _path(0.0)), (100.5, _path(0.5)), (110.0, _path(20.0))]
+    assert _lead(PROBLEM, ranked) == pytest.approx(0.10)
+    assert _lead(PROBLEM, ranked[:2]) == float('inf')
+
+
+def test_refined_margin_needs_a_feasible_distinct_runner_up():
+    best = _cand(100.0, 0.0)
+    same = _cand(100.2, 0.4)
+    other = _cand(103.0, 25.0)
+    # Only the same basin refined: no lead, whatever the screening said.
+    assert _refined_margin(PROBLEM, best, [best, same], 0.5) == 0.0
+    # A distinct basin 3 % worse caps the screening's 5 % lead; a smaller one stands.
+    assert _refined_margin(PROBLEM, best, [best, same, other], 0.05) == pytest.approx(0.03)
+    assert _refined_margin(PROBLEM, best, [best, other], 0.01) == pytest.approx(0.01)
+    # An infeasible runner-up is no comparison, and an infeasible best has no lead.
+    assert _refined_margin(PROBLEM, best, [best, _cand(90.0, 25.0, False)], 0.05) == 0.0
+    worst = _cand(100.0, 0.0, feasible=False)
+    assert _refined_margin(PROBLEM, worst, [worst, other], 0.05) == 0.0
+
+
+@pytest.mark.parametrize('name, crowded', [('big300_0', True), ('uniform20_0', False),
+                                           ('weak20_0', False), ('coplanar_0', False)])
+def test_crowded_fields_are_those_whose_threat_reach_exceeds_the_spacing(name, crowded):
+    sc = load_scenario(DATA / f'{name}.yaml')
+    reach = float(np.median(sc.threats.intensities)) ** 0.25
+    assert (reach >= sc.threats.typical_spacing(sc.box)) == crowded
+    assert _crowded(sc.threats, sc.box) == crowded
