@@ -33,10 +33,12 @@ OFF = {'max_climb_deg': 90.0, 'max_dive_deg': 90.0, 'min_turn_radius_m': 0.0}
 
 WORKER = r'''
 import json, sys, time
+# The checkout's package first: bench_tools puts this repository on sys.path.
+from threat_planner import load_scenario, plan, PlannerConfig
+import threat_planner
 sys.path.insert(0, BENCH)
 import bench_tools as bt
-from threat_planner import load_scenario, plan, PlannerConfig
-print(json.dumps({'ready': True}), flush=True)
+print(json.dumps({'ready': True, 'package': threat_planner.__file__}), flush=True)
 for line in sys.stdin:
     case = json.loads(line)
     if 'threats' in case:
@@ -58,9 +60,10 @@ class Worker:
     def __init__(self, tree: Path) -> None:
         env = dict(os.environ, PYTHONPATH=str(tree))
         code = WORKER.replace('BENCH', repr(str(ROOT / 'bench')))
-        self.proc = subprocess.Popen([sys.executable, '-c', code], env=env, text=True,
+        self.proc = subprocess.Popen([sys.executable, '-c', code], env=env, text=True, cwd=tree,
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE)
-        json.loads(self.proc.stdout.readline())
+        self.package = json.loads(self.proc.stdout.readline())['package']
+        assert self.package.startswith(str(tree.resolve())), (self.package, tree)
 
     def plan(self, case: dict) -> dict:
         self.proc.stdin.write(json.dumps(case) + '\n')

@@ -26,6 +26,11 @@ __all__ = ['plan_best', 'refine', 'repair']
 #: Segments and stopping tolerance of the coarse screening minimisation.
 COARSE_SEGMENTS = 8
 COARSE_TOLERANCE = 1e-4
+#: L-BFGS iterations and augmented Lagrangian rounds of the slope-held screening (a
+#: ranking: measured against 200 and 6 on the 21 bundled cases, 15 % less time, final J
+#: within 0.04 % either way).
+SLOPE_SCREEN_ITERATIONS = 40
+SLOPE_SCREEN_ROUNDS = 3
 #: Largest (segment, threat) pairs per optimiser evaluation counted in full.
 OPTIMISER_DENSE_PAIRS = 4_000
 #: Optimiser cut-off beyond that, in typical threat spacings.
@@ -188,6 +193,8 @@ def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: flo
     for _, name, seq, coarse in screened:
         path = minimise_cost(resample(coarse, COARSE_SEGMENTS), p.threats, p.config.w,
                              bounds, slopes, cutoff=cutoff,
+                             constrained_iterations=SLOPE_SCREEN_ITERATIONS,
+                             constrained_rounds=SLOPE_SCREEN_ROUNDS,
                              tolerance=COARSE_TOLERANCE).points
         ok = check_limits(path, slopes, floor).feasible
         held.append((not ok, p.cost(path).J, f'{name} (slopes held)', seq, path))
@@ -253,7 +260,7 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
     name : str
         Seed name reported in PlanResult.seed.
     tolerance : float
-        Relative J decrease per iteration below which L-BFGS-B stops.
+        Relative J decrease per iteration below which L-BFGS stops.
     warm : bool
         The start is a previous plan: straight to the constrained rounds if it is feasible.
 
