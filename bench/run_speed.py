@@ -151,7 +151,8 @@ def write_markdown(cold: list[dict], scale: list[dict], quality: list[dict]) -> 
                          + _verdict(row['ms'], TARGETS[f'{row["threats"]} cold']))
     lines.append(
         f'* warm replan at 20 threats, limits on: accepted {len(warm_on)} of {len(on)} '
-        '(refused where the limits bound the previous plan, core/warm.py)'
+        '(core/warm.py: refused where the limits bound the previous plan and no second '
+        'basin refined under them compares)'
         + (f', median {statistics.median(warm_on):.0f} ms: '
            + _verdict(statistics.median(warm_on), TARGETS['20 warm median'])
            if warm_on else ''))
