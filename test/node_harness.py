@@ -36,6 +36,12 @@ FASTDDS_PROFILE = Path(__file__).resolve().parent / 'fastdds_local_discovery.xml
 LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      history=HistoryPolicy.KEEP_LAST, depth=1)
+#: A latched topic read as a log: the last message on joining, then every one after it
+#: (depth 1 drops one of two messages that arrive before this process takes the first:
+#: a WARN plan_info published just before the next plan's was lost under load).
+LATCHED_LOG = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                         history=HistoryPolicy.KEEP_LAST, depth=100)
 VOLATILE = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE,
                       history=HistoryPolicy.KEEP_LAST, depth=10)
@@ -301,7 +307,7 @@ class PlannerNode:
         from sensor_msgs.msg import PointCloud2
         self.client, self.ns, self.log_path, self.scenario = client, ns, log_path, scenario
         self.proc = start_process(planner_command(ns, params), domain, log_path)
-        client.subscribe(f'{ns}/plan_info', DiagnosticArray)
+        client.subscribe(f'{ns}/plan_info', DiagnosticArray, LATCHED_LOG)
         client.subscribe(f'{ns}/path', PathMsg)
         self.threats = client.publisher(f'{ns}/threats', PointCloud2)
         self.poses = client.publisher(f'{ns}/threat_poses', PoseArray)
