@@ -97,7 +97,8 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
               lam, mu, gbuf, pgrad, maxiter, ftol, gtol, m, max_step, out):
     """Projected L-BFGS from x0 within [lo, hi]; the minimiser into out.
 
-    Returns (value, iterations, evaluations).
+    Returns (value, iterations, evaluations, why it stopped: 0 small decrease, 1 small
+    gradient, 2 no step accepted, 3 iteration limit).
     """
     nv = x0.shape[0]
     n1 = nv // 3

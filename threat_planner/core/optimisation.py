@@ -163,14 +163,14 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     # Coarse to fine: the rounds at half the segments (and half of that, ...) find the
     # constrained basin and its multipliers for a tenth of the evaluations, and the fine
     # level starts next to its answer (measured in bench/results/profile_*.txt).
-    lam, mu, best = None, PENALTY_START, None
+    lam, best = None, None
     for count in reversed(counts):
         finest = count == n - 1
         path = resample(x, count)
         lvl = level if finest else probe if count == probe.n - 1 else _Level(
             path, threats, w, box, limits, cutoff, COARSE_LEVEL_TOLERANCE, stats)
-        x, lam, _, best = lvl.constrained(path, lam, mu, constrained_iterations,
-                                          constrained_rounds, keep_start=skip and finest)
+        x, lam, best = lvl.constrained(path, lam, PENALTY_START, constrained_iterations,
+                                       constrained_rounds, keep_start=skip and finest)
     if best is not None:
         return stats.result(best, True)
     # Stalled short of feasibility: the caller repairs (best.repair) or reports.
@@ -281,8 +281,10 @@ class _Level:
                     rounds: int = MAX_OUTER, keep_start: bool = False) -> tuple:
         """Augmented Lagrangian rounds from x (multipliers lam of a coarser level or None).
 
-        Returns ``(x, lam, mu, best)``: the last iterate, its multipliers and penalty
-        (for the next finer level) and the least-objective feasible iterate or None.
+        Returns ``(x, (term, lam), best)``: the last iterate, its multipliers with their
+        term (for the next finer level) and the least-objective feasible iterate or None.
+        Every level starts at penalty ``mu``: carrying the coarse level's grown penalty
+        made the fine rounds too stiff (uniform20_0 at w 0.8: infeasible, J +12 %).
         """
         x = self.clip(x)
         self.pick_pairs(x)
@@ -306,7 +308,7 @@ class _Level:
             if violation > 0.25 * prev_violation:
                 mu *= PENALTY_GROWTH
             prev_violation, prev_f = violation, f
-        return x, (term, lam), mu, None if best is None else best[1]
+        return x, (term, lam), None if best is None else best[1]
 
 
 _NO_THREATS = _frozen(np.zeros((0, 3)))
