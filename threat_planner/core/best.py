@@ -133,8 +133,8 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
         if best.limit_check.feasible and (feasible >= BOUND_BASINS or not bound):
             break
     # The warm-start rule's lead: the screening's where the limits did not bind; where
-    # they did, the screening (which holds no turn radius) says nothing, and the lead is
-    # that of the best refined basin over the next distinct refined one, or none.
+    # they did, the slope-held screening's, capped by the lead over the next distinct
+    # basin refined under the limits (none refined: no lead; see _refined_margin).
     best.basin_margin = _refined_margin(p, best, refined, held_margin) if bound else margin
     if not best.limit_check.feasible:
         best = repair(p, best)

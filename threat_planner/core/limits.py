@@ -36,8 +36,6 @@ __all__ = ['FlightLimits', 'LimitCheck', 'check_limits', 'climb_angles',
 
 #: Slack of the final check, so a path optimised onto a limit is not failed by rounding.
 CHECK_SLACK = 1e-6
-#: Segments shorter than this fraction of the longest count as zero length.
-_DEGENERATE = DEGENERATE
 
 
 @dataclass(frozen=True)
@@ -161,7 +159,7 @@ def turn_radii(points: NDArray) -> NDArray:
     p = np.asarray(points, float)
     d = np.diff(p, axis=0)
     ln = np.linalg.norm(d, axis=1)
-    keep = np.concatenate([[True], ln > _DEGENERATE * max(float(ln.max(initial=0.0)), 1.0)])
+    keep = np.concatenate([[True], ln > DEGENERATE * max(float(ln.max(initial=0.0)), 1.0)])
     p = p[keep]
     if len(p) < 3:
         return np.zeros(0)

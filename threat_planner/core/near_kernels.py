@@ -50,6 +50,14 @@ def _bin(positions, origin, cell, dims):
     return start, order
 
 
+@njit(cache=True, inline='always')
+def _cells(m, reach, origin, cell, dim):
+    """First and last cell index along one axis of the interval m +- reach."""
+    first = min(max(int(math.floor((m - reach - origin) / cell)), 0), dim - 1)
+    last = min(max(int(math.floor((m + reach - origin) / cell)), 0), dim - 1)
+    return first, last
+
+
 @njit(cache=True, parallel=True)
 def _near_costs(a, b, positions, f, radius, origin, cell, dims, start, order, c2, c3,
                 out, near_f):
@@ -62,17 +70,15 @@ def _near_costs(a, b, positions, f, radius, origin, cell, dims, start, order, c2
         mx, my, mz = a[s, 0] + 0.5 * dx, a[s, 1] + 0.5 * dy, a[s, 2] + 0.5 * dz
         reach = radius + 0.5 * ln
         reach2 = reach * reach
-        lo = np.empty(3, np.int64)
-        hi = np.empty(3, np.int64)
-        for k, m in enumerate((mx, my, mz)):
-            lo[k] = min(max(int(math.floor((m - reach - origin[k]) / cell)), 0), dims[k] - 1)
-            hi[k] = min(max(int(math.floor((m + reach - origin[k]) / cell)), 0), dims[k] - 1)
+        x0, x1 = _cells(mx, reach, origin[0], cell, dims[0])
+        y0, y1 = _cells(my, reach, origin[1], cell, dims[1])
+        z0, z1 = _cells(mz, reach, origin[2], cell, dims[2])
         total = 0.0
         fsum = 0.0
-        for ix in range(lo[0], hi[0] + 1):
-            for iy in range(lo[1], hi[1] + 1):
+        for ix in range(x0, x1 + 1):
+            for iy in range(y0, y1 + 1):
                 base = (ix * dims[1] + iy) * dims[2]
-                for c in range(base + lo[2], base + hi[2] + 1):
+                for c in range(base + z0, base + z1 + 1):
                     for q in range(start[c], start[c + 1]):
                         i = order[q]
                         qx = positions[i, 0] - mx
