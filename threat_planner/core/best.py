@@ -158,6 +158,12 @@ def _lead(p: Problem, ranked: list[tuple[float, NDArray]]) -> float:
     return float('inf')
 
 
+def _same_basin(p: Problem, a: NDArray, b: NDArray) -> bool:
+    """Whether two paths end within 1 % of the box diagonal (at the coarse resolution)."""
+    return bool(np.max(np.linalg.norm(resample(a, COARSE_SEGMENTS) - resample(b, COARSE_SEGMENTS),
+                                      axis=1)) <= 0.01 * p.box.diagonal)
+
+
 def _refined_margin(p: Problem, best: Candidate, refined: list[Candidate],
                     held_margin: float) -> float:
     """Return the warm-start lead of best where the limits bound: 0 unless it is feasible.
@@ -190,7 +196,12 @@ def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: flo
     floor = float(p.box.lo[2])
     held = []
     # Every seed: re-screening only the best 4 lost 10 % J on uniform20_1 at w = 0.8.
+    kept: list[NDArray] = []
     for _, name, seq, coarse in screened:
+        # A seed that screened into the basin of a better-ranked one would repeat its run.
+        if any(_same_basin(p, coarse, k) for k in kept):
+            continue
+        kept.append(coarse)
         path = minimise_cost(resample(coarse, COARSE_SEGMENTS), p.threats, p.config.w,
                              bounds, slopes, cutoff=cutoff,
                              constrained_iterations=SLOPE_SCREEN_ITERATIONS,

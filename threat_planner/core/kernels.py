@@ -78,6 +78,8 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
     dense = seg.shape[0] == 0
     n_pairs = n_seg * n_thr if dense else seg.shape[0]
     grad[:, :] = 0.0
+    # Each segment's unit vector, length and its inverse, once (not once per threat).
+    sd = np.empty((n_seg, 5))
     j_l = 0.0
     for s in range(n_seg):
         dx = points[s + 1, 0] - points[s, 0]
@@ -85,8 +87,11 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
         dz = points[s + 1, 2] - points[s, 2]
         ln = math.sqrt(dx * dx + dy * dy + dz * dz)
         j_l += ln
+        sd[s, 3] = ln
         if ln > 0:
-            g = (1.0 - w) / ln
+            il = 1.0 / ln
+            sd[s, 0], sd[s, 1], sd[s, 2], sd[s, 4] = dx * il, dy * il, dz * il, il
+            g = (1.0 - w) * il
             grad[s, 0] -= g * dx
             grad[s, 1] -= g * dy
             grad[s, 2] -= g * dz
@@ -101,21 +106,18 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
         else:
             s = seg[k]
             i = thr[k]
-        ax, ay, az = points[s, 0], points[s, 1], points[s, 2]
-        dx = points[s + 1, 0] - ax
-        dy = points[s + 1, 1] - ay
-        dz = points[s + 1, 2] - az
-        ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+        ln = sd[s, 3]
         if ln == 0:
             continue
-        ux, uy, uz = dx / ln, dy / ln, dz / ln
-        ex = ax - positions[i, 0]
-        ey = ay - positions[i, 1]
-        ez = az - positions[i, 2]
+        ux, uy, uz, il = sd[s, 0], sd[s, 1], sd[s, 2], sd[s, 4]
+        ex = points[s, 0] - positions[i, 0]
+        ey = points[s, 1] - positions[i, 1]
+        ez = points[s, 2] - positions[i, 2]
         t1 = ex * ux + ey * uy + ez * uz
         t2 = t1 + ln
         px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
-        h = math.sqrt(px * px + py * py + pz * pz)
+        h2 = px * px + py * py + pz * pz
+        h = math.sqrt(h2)
         if h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE and t2 >= -CONTACT_DISTANCE:
             return math.inf
         ca, r2a, r3a = _split(t1, h, c2, c3)
@@ -128,12 +130,13 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
             i3 += dc * (3.0 * _PI / 16.0) / h ** 5
         fi = f[i]
         j_r += fi * i2
-        h2 = h * h
-        phi_a = fi / (t1 * t1 + h2) ** 2
-        phi_b = fi / (t2 * t2 + h2) ** 2
+        da = t1 * t1 + h2
+        db = t2 * t2 + h2
+        phi_a = fi / (da * da)
+        phi_b = fi / (db * db)
         m0 = 4.0 * fi * i3
-        coef_a = (phi_a - phi_b) / ln - m0 * (1.0 + t1 / ln)
-        coef_b = (phi_b - phi_a) / ln + m0 * t1 / ln
+        coef_a = (phi_a - phi_b) * il - m0 * (1.0 + t1 * il)
+        coef_b = (phi_b - phi_a) * il + m0 * t1 * il
         grad[s, 0] += w * (coef_a * px - phi_a * ux)
         grad[s, 1] += w * (coef_a * py - phi_a * uy)
         grad[s, 2] += w * (coef_a * pz - phi_a * uz)
@@ -242,6 +245,41 @@ def _kernel_split(points, positions, f, w, seg, thr, c2, c3, grad):
         grad[sb[c]:sb[c + 1] + 1] += bufs[c, :sb[c + 1] - sb[c] + 1]
         total += vals[c]
     return total
+
+
+@njit(cache=True)
+def _resample(points, n_segments, out):
+    """Points at equal arc-length steps along a polyline into out (n+1, 3), ends kept."""
+    m = points.shape[0]
+    cum = np.zeros(m)
+    for k in range(1, m):
+        d = points[k] - points[k - 1]
+        cum[k] = cum[k - 1] + math.sqrt(d @ d)
+    total = cum[m - 1]
+    j = 0
+    for q in range(n_segments + 1):
+        arc = total * q / n_segments
+        # The last segment that starts at or before arc (zero-length ones passed over).
+        while j < m - 2 and cum[j + 1] <= arc:
+            j += 1
+        span = cum[j + 1] - cum[j]
+        a = (arc - cum[j]) / span if span > 0 else 0.0
+        a = min(max(a, 0.0), 1.0)
+        out[q] = points[j] + a * (points[j + 1] - points[j])
+    out[0] = points[0]
+    out[n_segments] = points[m - 1]
+
+
+def resample(points: NDArray, n_segments: int) -> NDArray:
+    """Points at equal arc-length steps along a polyline (n+1, 3), ends kept, compiled."""
+    points = np.ascontiguousarray(points, float)
+    out = np.empty((n_segments + 1, 3))
+    if len(points) == 1 or n_segments < 1:
+        out[:] = points[0]
+        out[-1] = points[-1]
+        return out
+    _resample(points, int(n_segments), out)
+    return out
 
 
 _NO_PAIRS = np.zeros(0, np.int64)

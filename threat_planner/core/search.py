@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from threat_planner.core.graph_kernels import Graph
 from threat_planner.core.kernels import segment_costs as compiled_costs
 from threat_planner.core.near_kernels import near_segment_costs
 from threat_planner.errors import PlanningError
@@ -241,17 +242,26 @@ def dijkstra_with_terminals(network: Network, weights: NDArray, start_costs: NDA
     Raises:
         PlanningError: if no exit is reachable from any entry.
     """
+    graph = _terminal_graph(network, entries, exits)
+    return _route(graph, network.n_nodes,
+                  np.concatenate([weights, start_costs, goal_costs]))
+
+
+def _terminal_graph(network: Network, entries: NDArray, exits: NDArray) -> Graph:
+    """Return the network plus the start (node m) and goal (m + 1) joined to candidates."""
     m = network.n_nodes
-    s, t = m, m + 1
     edges = np.concatenate([network.edges,
-                            np.stack([np.full(len(entries), s), entries], axis=1),
-                            np.stack([exits, np.full(len(exits), t)], axis=1)])
-    g = _graph(m + 2, edges, np.concatenate([weights, start_costs, goal_costs]))
-    dist, pred = dijkstra(g, directed=False, indices=s, return_predecessors=True)
-    if not np.isfinite(dist[t]):
+                            np.stack([np.full(len(entries), m), entries], axis=1),
+                            np.stack([exits, np.full(len(exits), m + 1)], axis=1)])
+    return Graph(m + 2, edges)
+
+
+def _route(graph: Graph, m: int, weights: NDArray) -> tuple[list[int], float]:
+    """Least-weight route from the start (node m) to the goal (m + 1), ends dropped."""
+    dist, pred = graph.shortest(weights, m)
+    if not np.isfinite(dist[m + 1]):
         raise PlanningError('network: the goal is not reachable from the start')
-    seq = _walk_back(pred, s, t)
-    return seq[1:-1], float(dist[t])
+    return _walk_back(pred, m, m + 1)[1:-1], float(dist[m + 1])
 
 
 def alternative_routes(network: Network, weights: NDArray, start_costs: NDArray,
@@ -279,9 +289,11 @@ def alternative_routes(network: Network, weights: NDArray, start_costs: NDArray,
     m = network.n_nodes
     keys = network.edges[:, 0] * m + network.edges[:, 1]
     order = np.argsort(keys)
+    graph = _terminal_graph(network, entries, exits)
+    legs = np.concatenate([start_costs, goal_costs])
     routes: list[list[int]] = []
     for _ in range(max(1, 2 * count)):
-        seq, _ = dijkstra_with_terminals(network, w, start_costs, entries, goal_costs, exits)
+        seq, _ = _route(graph, m, np.concatenate([w, legs]))
         if seq not in routes:
             routes.append(seq)
             if len(routes) == count:

@@ -12,11 +12,12 @@ routes by Dijkstra; the screening then decides whether one of them wins.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from numpy.typing import NDArray
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra
 
+from threat_planner.core.graph_kernels import Graph
 from threat_planner.core.search import segment_costs
 from threat_planner.core.threats import Box, ThreatField
 
@@ -47,6 +48,13 @@ def surface_lattice(box: Box, divisions: int) -> tuple[NDArray, NDArray]:
         ``(points (P, 3) [m], edges (E, 2))``: neighbours differ by at most one step per
         axis and share a face, so every edge runs on the surface (face diagonals included).
     """
+    cells, edges = _unit_lattice(divisions)
+    return box.lo + cells / divisions * (box.hi - box.lo), edges
+
+
+@lru_cache(maxsize=4)
+def _unit_lattice(divisions: int) -> tuple[NDArray, NDArray]:
+    """Return the lattice in integer cells 0..divisions per axis (read-only: shared)."""
     n = divisions
     ticks = np.arange(n + 1)
     grid = np.stack(np.meshgrid(ticks, ticks, ticks, indexing='ij'), axis=-1).reshape(-1, 3)
@@ -68,8 +76,10 @@ def surface_lattice(box: Box, divisions: int) -> tuple[NDArray, NDArray]:
         src = np.flatnonzero(ok)
         keep = dst >= 0
         pairs.append(np.stack([src[keep], dst[keep]], axis=1))
-    points = box.lo + cells / n * (box.hi - box.lo)
-    return points, np.concatenate(pairs)
+    edges = np.concatenate(pairs)
+    cells.setflags(write=False)
+    edges.setflags(write=False)
+    return cells, edges
 
 
 def surface_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: float,
@@ -105,13 +115,11 @@ def surface_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: fl
     cols = np.concatenate([edges[:, 1], legs[0], np.full(k, m + 1)])
     weights = np.maximum(weights, 1e-12)
     keys = np.minimum(rows, cols) * (m + 2) + np.maximum(rows, cols)
+    graph = Graph(m + 2, np.stack([rows, cols], axis=1))
     routes: list[NDArray] = []
     seqs: list[list[int]] = []
     for _ in range(2 * count):
-        g = csr_matrix((np.concatenate([weights, weights]),
-                        (np.concatenate([rows, cols]), np.concatenate([cols, rows]))),
-                       shape=(m + 2, m + 2))
-        dist, pred = dijkstra(g, directed=False, indices=m, return_predecessors=True)
+        dist, pred = graph.shortest(weights, m)
         if not np.isfinite(dist[m + 1]):
             break
         seq = [m + 1]
