@@ -80,3 +80,19 @@ def test_resample_matches_interpolation_along_the_arc_length():
         assert np.array_equal(got[0], pts[0]) and np.array_equal(got[-1], pts[-1])
         steps = np.linalg.norm(np.diff(got, axis=0), axis=1)
         assert np.all(steps <= np.linalg.norm(np.diff(pts, axis=0), axis=1).sum() / n + 1e-9)
+
+
+def test_the_kernel_cache_is_named_by_every_compiled_module():
+    """A module compiled with cache=True outside the hash could load a stale callee."""
+    from pathlib import Path
+
+    import numba
+
+    import threat_planner.core.kernels  # noqa: F401 - configures the cache
+    from threat_planner.core import _numba_cache
+
+    core = Path(_numba_cache.__file__).parent
+    compiled = {p.name for p in core.glob('*.py') if '@njit(cache=True' in p.read_text()}
+    assert compiled and compiled <= set(_numba_cache.SOURCES)
+    assert numba.config.CACHE_DIR == str(_numba_cache.cache_dir())
+    assert _numba_cache.cache_dir().name != ''

@@ -4,7 +4,8 @@ The same closed form as :mod:`threat_planner.core.cost` (the split antiderivativ
 cancel the large atan terms symbolically, the same series below ``_SERIES_LIMIT``), written
 as one loop over (segment, threat) pairs so that a 40-segment, 20-threat evaluation costs
 microseconds instead of the ~0.3 ms numpy spends on call overhead. ``cache=True`` keeps the
-compiled code on disk: the first call in a fresh environment compiles (about 2 s, measured
+compiled code on disk (in a folder named by a hash of the kernels' sources,
+:mod:`._numba_cache`): the first call in a fresh environment compiles (about 2 s, measured
 in ``bench/results/speed.md``), later processes load it in milliseconds. Without numba the
 same functions run as plain Python (correct, slow); numba is an install requirement.
 """
@@ -21,6 +22,8 @@ from numpy.typing import NDArray
 try:
     from numba import njit, prange
     HAVE_NUMBA = True
+    from threat_planner.core import _numba_cache
+    _numba_cache.configure()
 except ImportError:  # pragma: no cover - numba is in install_requires
     HAVE_NUMBA = False
     prange = range
