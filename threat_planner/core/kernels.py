@@ -158,10 +158,16 @@ def _pair_integral(a, b, s, positions, i, c2, c3):
     ln = math.sqrt(dx * dx + dy * dy + dz * dz)
     if ln == 0:
         return 0.0
-    ux, uy, uz = dx / ln, dy / ln, dz / ln
-    ex = a[s, 0] - positions[i, 0]
-    ey = a[s, 1] - positions[i, 1]
-    ez = a[s, 2] - positions[i, 2]
+    return _along(a[s, 0], a[s, 1], a[s, 2], dx / ln, dy / ln, dz / ln, ln, positions, i,
+                  c2, c3)
+
+
+@njit(cache=True, inline='always')
+def _along(ax, ay, az, ux, uy, uz, ln, positions, i, c2, c3):
+    """Integral of ds / d^4 from threat i along ln [m] from (ax, ay, az) in direction u."""
+    ex = ax - positions[i, 0]
+    ey = ay - positions[i, 1]
+    ez = az - positions[i, 2]
     t1 = ex * ux + ey * uy + ez * uz
     t2 = t1 + ln
     px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
@@ -176,15 +182,30 @@ def _pair_integral(a, b, s, positions, i, c2, c3):
     return i2
 
 
+@njit(cache=True, inline='always')
+def _segment_total(a, b, s, positions, f, c2, c3):
+    """J_R of segment s over every threat (its direction computed once)."""
+    dx = b[s, 0] - a[s, 0]
+    dy = b[s, 1] - a[s, 1]
+    dz = b[s, 2] - a[s, 2]
+    ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if ln == 0:
+        return 0.0
+    ax, ay, az = a[s, 0], a[s, 1], a[s, 2]
+    ux, uy, uz = dx / ln, dy / ln, dz / ln
+    total = 0.0
+    for i in range(positions.shape[0]):
+        total += f[i] * _along(ax, ay, az, ux, uy, uz, ln, positions, i, c2, c3)
+    return total
+
+
 @njit(cache=True)
 def _segment_costs(a, b, positions, f, seg, thr, c2, c3, out):
     """J_R of each segment into out, over the given pairs; seg empty means all pairs."""
-    n_thr = positions.shape[0]
     out[:] = 0.0
     if seg.shape[0] == 0:
         for s in range(a.shape[0]):
-            for i in range(n_thr):
-                out[s] += f[i] * _pair_integral(a, b, s, positions, i, c2, c3)
+            out[s] = _segment_total(a, b, s, positions, f, c2, c3)
     else:
         for k in range(seg.shape[0]):
             out[seg[k]] += f[thr[k]] * _pair_integral(a, b, seg[k], positions, thr[k], c2, c3)
@@ -194,10 +215,7 @@ def _segment_costs(a, b, positions, f, seg, thr, c2, c3, out):
 def _segment_costs_parallel(a, b, positions, f, c2, c3, out):
     """:func:`_segment_costs` over all pairs, the segments in parallel."""
     for s in prange(a.shape[0]):
-        total = 0.0
-        for i in range(positions.shape[0]):
-            total += f[i] * _pair_integral(a, b, s, positions, i, c2, c3)
-        out[s] = total
+        out[s] = _segment_total(a, b, s, positions, f, c2, c3)
 
 
 #: Pairs per evaluation from which J and its gradient run on several threads (measured:
@@ -385,11 +403,32 @@ def segment_costs(a: NDArray, b: NDArray, positions: NDArray, intensities: NDArr
     return out
 
 
+@njit(cache=True)
+def _path_cost(points, positions, f, c2, c3):
+    """(J_L, J_R) of a polyline over every threat, in one pass."""
+    j_l = 0.0
+    j_r = 0.0
+    a = points[:-1]
+    b = points[1:]
+    for s in range(points.shape[0] - 1):
+        d = b[s] - a[s]
+        j_l += math.sqrt(d @ d)
+        j_r += _segment_total(a, b, s, positions, f, c2, c3)
+    return j_l, j_r
+
+
 def path_cost(points: NDArray, positions: NDArray, intensities: NDArray, w: float) -> Cost:
     """Cost of a polyline as :func:`.cost.path_cost` (the same closed form), compiled."""
     points = np.ascontiguousarray(points, float)
-    j_l = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
-    j_r = float(segment_costs(points[:-1], points[1:], positions, intensities).sum())
+    if (len(points) - 1) * len(positions) >= PARALLEL_PAIRS:
+        j_l = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+        j_r = float(segment_costs(points[:-1], points[1:], positions, intensities).sum())
+    elif len(positions) == 0 or len(points) < 2:
+        j_l = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+        j_r = 0.0
+    else:
+        j_l, j_r = _path_cost(points, _frozen(positions), _frozen(intensities), _FROZEN_C2,
+                              _FROZEN_C3)
     return Cost(w * j_r + (1.0 - w) * j_l, j_l, j_r)
 
 
