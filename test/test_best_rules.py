@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from threat_planner.core.best import _lead, _refined_margin
+from threat_planner.core.best import _lead, _refined_margin, _runner_up_lead, RUNNER_UP_MARGIN
 from threat_planner.core.optimisation import _crowded
 from threat_planner.core.scenario import load_scenario
 from threat_planner.core.threats import Box
@@ -58,3 +58,21 @@ def test_crowded_fields_are_those_whose_threat_reach_exceeds_the_spacing(name, c
     reach = float(np.median(sc.threats.intensities)) ** 0.25
     assert (reach >= sc.threats.typical_spacing(sc.box)) == crowded
     assert _crowded(sc.threats, sc.box) == crowded
+
+
+def test_a_runner_up_is_finished_only_if_it_may_win():
+    """Compared at the coarse level: same basin or clearly worse stops it, close goes on."""
+    from threat_planner.core.limits import FlightLimits
+
+    class Costs(SimpleNamespace):
+        def cost(self, points):
+            return SimpleNamespace(J=self.j[round(float(points[4, 0] - 50.0), 3)])
+
+    problem = Costs(box=BOX, limits=FlightLimits(90.0, 90.0, 0.0),
+                    j={0.0: 100.0, 0.5: 100.2, 20.0: 100.0 * (1 + 2 * RUNNER_UP_MARGIN),
+                       30.0: 100.0 * (1 + RUNNER_UP_MARGIN / 2)})
+    best = SimpleNamespace(level_state=SimpleNamespace(points=_path(0.0)))
+    assert _runner_up_lead(problem, best, SimpleNamespace(final=_path(0.5))) == 0.0
+    assert _runner_up_lead(problem, best, SimpleNamespace(final=_path(20.0))) == \
+        pytest.approx(2 * RUNNER_UP_MARGIN)
+    assert _runner_up_lead(problem, best, SimpleNamespace(final=_path(30.0))) is None

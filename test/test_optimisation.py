@@ -68,3 +68,16 @@ def test_a_cut_off_run_stays_where_its_pairs_hold():
     assert moves[cutoff] <= TRUST_CUTOFFS * cutoff + 1e-9
     # Without the cut-off the same run goes further: the region is what held it.
     assert moves[None] > TRUST_CUTOFFS * cutoff
+
+
+def test_the_fine_level_resumed_from_the_coarse_state_is_the_full_run(problem):
+    """stop_before_finest, then resume: the same path as one uninterrupted minimisation."""
+    threats, box, start, goal = problem
+    x0 = resample(np.vstack([start, [60.0, 40.0, 65.0], goal]), 40)
+    limits = FlightLimits(8.0, 8.0, 20.0, 0.0)
+    full = minimise_cost(x0, threats, 0.5, box, limits)
+    part = minimise_cost(x0, threats, 0.5, box, limits, stop_before_finest=True)
+    assert full.constrained and part.state is not None
+    assert len(part.points) == 21                       # the 20-segment level's answer
+    rest = minimise_cost(x0, threats, 0.5, box, limits, resume=part.state)
+    np.testing.assert_array_equal(rest.points, full.points)

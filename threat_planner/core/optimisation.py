@@ -26,7 +26,7 @@ from threat_planner.core.limits import check_limits, FlightLimits
 from threat_planner.core.smoothing import resample
 from threat_planner.core.threats import Box, ThreatField
 
-__all__ = ['OptimisationResult', 'minimise_cost']
+__all__ = ['LevelState', 'OptimisationResult', 'minimise_cost']
 
 #: Weight of the even-spacing term relative to the length cost.
 SPACING_WEIGHT = 1e-3
@@ -85,13 +85,31 @@ class OptimisationResult:
     evaluations: int
     rounds: int
     constrained: bool = False
+    #: Under binding limits with coarse levels: the state after the level before the
+    #: finest (``stop_before_finest`` returns there; ``resume`` continues from it).
+    state: 'LevelState | None' = None
+
+
+@dataclass(frozen=True)
+class LevelState:
+    """The constrained stage after one level: its path, multipliers and best iterate."""
+
+    x: NDArray
+    lam: tuple
+    best: NDArray | None
+
+    @property
+    def points(self) -> NDArray:
+        """The level's answer: its least-objective feasible iterate, else its last."""
+        return self.x if self.best is None else self.best
 
 
 def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | None,
                   limits: FlightLimits | None = None, cutoff: float | None = None,
                   max_iterations: int = 1000, tolerance: float = 1e-6,
                   constrained_iterations: int = 200, constrained_rounds: int = MAX_OUTER,
-                  constrained_only: bool = False) -> OptimisationResult:
+                  constrained_only: bool = False, stop_before_finest: bool = False,
+                  resume: LevelState | None = None) -> OptimisationResult:
     """Minimise J over the interior vertices within the box and the flight limits.
 
     Parameters
@@ -120,6 +138,11 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     constrained_only : bool
         Skip the box-only run when the start meets the limits (a warm start near the
         constrained optimum: the box-only run would leave it and the rounds come back).
+    stop_before_finest : bool
+        Under binding limits, return after the coarse levels (``state`` set, ``points``
+        that level's answer) to let the caller decide whether the fine level is worth it.
+    resume : LevelState, optional
+        Continue from such a state (``points`` still the full-resolution start).
 
     Returns
     -------
@@ -147,7 +170,11 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     coarse = len(counts) > 1
     probe = _Level(resample(x, counts[-1]), threats, w, box, limits, cutoff,
                    COARSE_LEVEL_TOLERANCE, stats) if coarse else level
-    if not skip:
+    lam, best = None, None
+    if resume is not None:
+        x, lam, best = resume.x, resume.lam, resume.best
+        counts = [c for c in counts if c > len(x) - 1]
+    elif not skip:
         given = x
         # The box-only optimum, at the coarsest level first: the answer where it meets
         # the limits, else the start of the constrained rounds (at 40 segments under
@@ -168,18 +195,22 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     # Coarse to fine: the rounds at half the segments (and half of that, ...) find the
     # constrained basin and its multipliers for a tenth of the evaluations, and the fine
     # level starts next to its answer (measured in bench/results/profile_*.txt).
-    lam, best = None, None
+    state = None
     for count in reversed(counts):
         finest = count == n - 1
+        if finest and lam is not None:
+            state = LevelState(x, lam, best)
+            if stop_before_finest:
+                return stats.result(state.points, True, state)
         path = resample(x, count)
         lvl = level if finest else probe if count == probe.n - 1 else _Level(
             path, threats, w, box, limits, cutoff, COARSE_LEVEL_TOLERANCE, stats)
         x, lam, best = lvl.constrained(path, lam, PENALTY_START, constrained_iterations,
                                        constrained_rounds, keep_start=skip and finest)
     if best is not None:
-        return stats.result(best, True)
+        return stats.result(best, True, state)
     # Stalled short of feasibility: the caller repairs (best.repair) or reports.
-    return stats.result(x, True)
+    return stats.result(x, True, state)
 
 
 class _Stats:
@@ -193,9 +224,10 @@ class _Stats:
         self.evaluations += nfev
         self.rounds += 1
 
-    def result(self, x: NDArray, constrained: bool) -> OptimisationResult:
+    def result(self, x: NDArray, constrained: bool,
+               state: LevelState | None = None) -> OptimisationResult:
         return OptimisationResult(x, self.iterations, self.evaluations, self.rounds,
-                                  constrained)
+                                  constrained, state)
 
 
 class _Level:
