@@ -119,7 +119,9 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     held_margin = 0.0
     if p.limits.climb_on or p.limits.dive_on:
         held, held_margin = _slope_screening(p, screened, bounds, cutoff)
-        order = _interleave(order, held)
+        # The slope-held ranking first: its winner is the basin as flown (first the
+        # box-only winner: uniform20_1 refined two basins that never met the limits).
+        order = _interleave(held, order)
     p.clock.lap('screening_ms')
     best: Candidate | None = None
     bound, refined, runner_lead = False, [], None

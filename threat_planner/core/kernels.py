@@ -404,31 +404,26 @@ def segment_costs(a: NDArray, b: NDArray, positions: NDArray, intensities: NDArr
 
 
 @njit(cache=True)
-def _path_cost(points, positions, f, c2, c3):
-    """(J_L, J_R) of a polyline over every threat, in one pass."""
-    j_l = 0.0
+def _path_threat_cost(points, positions, f, c2, c3):
+    """J_R of a polyline over every threat, in one pass."""
     j_r = 0.0
-    a = points[:-1]
-    b = points[1:]
     for s in range(points.shape[0] - 1):
-        d = b[s] - a[s]
-        j_l += math.sqrt(d @ d)
-        j_r += _segment_total(a, b, s, positions, f, c2, c3)
-    return j_l, j_r
+        j_r += _segment_total(points[:-1], points[1:], s, positions, f, c2, c3)
+    return j_r
 
 
 def path_cost(points: NDArray, positions: NDArray, intensities: NDArray, w: float) -> Cost:
     """Cost of a polyline as :func:`.cost.path_cost` (the same closed form), compiled."""
     points = np.ascontiguousarray(points, float)
+    # J_L as cost.path_cost sums it, to the last bit.
+    j_l = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
     if (len(points) - 1) * len(positions) >= PARALLEL_PAIRS:
-        j_l = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
         j_r = float(segment_costs(points[:-1], points[1:], positions, intensities).sum())
     elif len(positions) == 0 or len(points) < 2:
-        j_l = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
         j_r = 0.0
     else:
-        j_l, j_r = _path_cost(points, _frozen(positions), _frozen(intensities), _FROZEN_C2,
-                              _FROZEN_C3)
+        j_r = _path_threat_cost(points, _frozen(positions), _frozen(intensities), _FROZEN_C2,
+                                _FROZEN_C3)
     return Cost(w * j_r + (1.0 - w) * j_l, j_l, j_r)
 
 
