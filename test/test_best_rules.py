@@ -76,3 +76,25 @@ def test_a_runner_up_is_finished_only_if_it_may_win():
     assert _runner_up_lead(problem, best, SimpleNamespace(final=_path(20.0))) == \
         pytest.approx(2 * RUNNER_UP_MARGIN)
     assert _runner_up_lead(problem, best, SimpleNamespace(final=_path(30.0))) is None
+
+
+@pytest.mark.parametrize('name, crowded', [('big300_0', True), ('uniform20_0', False)])
+def test_crowded_fields_are_minimised_without_the_preconditioner(name, crowded, monkeypatch):
+    """Its path-wide steps crossed threat cores on big300_0; elsewhere every run uses it."""
+    from threat_planner.core import optimisation
+    from threat_planner.core.limits import FlightLimits
+    from threat_planner.core.smoothing import resample
+
+    seen = []
+    real = optimisation.minimise
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs['precondition'])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(optimisation, 'minimise', spy)
+    sc = load_scenario(DATA / f'{name}.yaml')
+    x0 = resample(np.vstack([sc.start, sc.goal]), 20)
+    optimisation.minimise_cost(x0, sc.threats, 0.5, sc.box, FlightLimits(30.0, 30.0, 10.0),
+                               cutoff=3.0 * sc.threats.typical_spacing(sc.box))
+    assert seen and set(seen) == {not crowded}

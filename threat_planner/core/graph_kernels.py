@@ -3,8 +3,9 @@
 ``best`` runs a dozen Dijkstras a plan on graphs of a few hundred nodes (the penalised
 alternative routes over the network, the routes over the box's surface lattice), each with
 new weights on the same edges. scipy's ``csgraph.dijkstra`` needs a new sparse matrix every
-time, and building it cost ~0.3 ms against ~0.02 ms for the search itself; here the graph's
-structure is built once and only its weights change.
+time; here the graph's structure is built once and only its weights change (12 bundled
+cases, one run before and one after, not side by side: the alternative routes 2.7 -> 0.5 ms
+a plan, the surface routes 4.2 -> 1.6 ms with their lattice cached too).
 """
 
 from __future__ import annotations

@@ -52,11 +52,13 @@ COARSE_LEVEL_TOLERANCE = 1e-5
 #: Longest move of a vertex per L-BFGS iteration, in box diagonals: longer steps carried
 #: vertices across threats' cores on big300_0 (J 30 to 10^6 times the direct one's).
 MAX_STEP = 0.05
-#: Under a cut-off, one L-BFGS run moves each coordinate at most this many cut-offs from
-#: where the pairs were picked (then they are picked again): unbounded, the preconditioned
+#: Under a cut-off, one preconditioned L-BFGS run moves each coordinate at most this many
+#: cut-offs from where the pairs were picked (then they are picked again): unbounded, the
 #: runs carried paths 400-700 m into threats they did not see (10,000 threats, J 3.5x the
 #: start's); measured against 0.25 on big300_0 and 1,000-3,000 threats, 0.5 kept J lower.
 TRUST_CUTOFFS = 0.5
+#: Under a cut-off, the pairs are picked again once a vertex moved this many cut-offs.
+REPICK_CUTOFFS = 0.25
 #: Median threat reach over the typical spacing from which a field counts as crowded.
 CROWDED_REACH = 1.0
 
@@ -155,7 +157,10 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     if n < 3:
         return OptimisationResult(x, 0, 0, 0)
     stats = _Stats()
-    level = _Level(x, threats, w, box, limits, cutoff, tolerance, stats)
+    # Crowded fields: no preconditioning (its smooth, path-wide steps crossed threat
+    # cores on big300_0: J +0.5 % and +1.1 % with the limits off) and no coarse levels.
+    crowded = _crowded(threats, box)
+    level = _Level(x, threats, w, box, limits, cutoff, tolerance, stats, not crowded)
     x = level.clip(x)
     skip = (constrained_only and limits.any_constraint
             and check_limits(x, limits, level.floor).feasible)
@@ -164,12 +169,11 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     # (big300_0: reach 220 m, spacing 150 m) the coarse rounds ended in basins 3 to 300
     # times the direct rounds' J.
     counts = [n - 1]
-    while (counts[-1] // 2 >= COARSE_LEVEL_SEGMENTS and not skip
-           and not _crowded(threats, box)):
+    while counts[-1] // 2 >= COARSE_LEVEL_SEGMENTS and not skip and not crowded:
         counts.append(counts[-1] // 2)
     coarse = len(counts) > 1
     probe = _Level(resample(x, counts[-1]), threats, w, box, limits, cutoff,
-                   COARSE_LEVEL_TOLERANCE, stats) if coarse else level
+                   COARSE_LEVEL_TOLERANCE, stats, not crowded) if coarse else level
     lam, best = None, None
     if resume is not None:
         x, lam, best = resume.x, resume.lam, resume.best
@@ -204,7 +208,8 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
                 return stats.result(state.points, True, state)
         path = resample(x, count)
         lvl = level if finest else probe if count == probe.n - 1 else _Level(
-            path, threats, w, box, limits, cutoff, COARSE_LEVEL_TOLERANCE, stats)
+            path, threats, w, box, limits, cutoff, COARSE_LEVEL_TOLERANCE, stats,
+            not crowded)
         x, lam, best = lvl.constrained(path, lam, PENALTY_START, constrained_iterations,
                                        constrained_rounds, keep_start=skip and finest)
     if best is not None:
@@ -235,8 +240,9 @@ class _Level:
 
     def __init__(self, x: NDArray, threats: ThreatField, w: float, box: Box | None,
                  limits: FlightLimits, cutoff: float | None, tolerance: float,
-                 stats: _Stats) -> None:
+                 stats: _Stats, precondition: bool = True) -> None:
         n = self.n = len(x)
+        self.precondition = precondition
         self.threats, self.w, self.limits, self.cutoff = threats, float(w), limits, cutoff
         self.tolerance, self.stats = tolerance, stats
         self.max_step = np.inf if box is None else MAX_STEP * box.diagonal
@@ -292,7 +298,7 @@ class _Level:
         else:
             lim, gbuf, pgrad = term.kernel_args(), np.zeros(term.rows), np.zeros((self.n, 3))
         lo, hi = self.lo, self.hi
-        if self.cutoff is not None:
+        if self.cutoff is not None and self.precondition:
             # The pairs hold near where they were picked: within TRUST_CUTOFFS of it.
             r = TRUST_CUTOFFS * self.cutoff
             lo, hi = np.maximum(lo, p - r), np.minimum(hi, p + r)
@@ -300,7 +306,8 @@ class _Level:
             np.ascontiguousarray(p, float).reshape(-1), np.ascontiguousarray(lo).reshape(-1),
             np.ascontiguousarray(hi).reshape(-1), self.pairs[2], self.intensities, self.w,
             self.pairs[:2], _FROZEN_C2, _FROZEN_C3, self.spring, even, scale, lim, lam, mu,
-            gbuf, pgrad, maxiter, self.tolerance, max_step=self.max_step)
+            gbuf, pgrad, maxiter, self.tolerance, max_step=self.max_step,
+            precondition=self.precondition)
         self.stats.add(nit, nfev)
         return z.reshape(self.n, 3)
 
@@ -315,7 +322,7 @@ class _Level:
             moved = self.run(x, 0.0, _scale(self.value(x, 0.0)), maxiter)
             shift = float(np.max(np.linalg.norm(moved - x, axis=1)))
             x = moved
-            if self.cutoff is None or shift < 0.25 * self.cutoff:
+            if self.cutoff is None or shift < REPICK_CUTOFFS * self.cutoff:
                 break
         return x
 
@@ -339,7 +346,7 @@ class _Level:
         picked = x
         for _ in range(rounds):
             if self.cutoff is not None and float(np.max(np.linalg.norm(
-                    x - picked, axis=1))) >= 0.25 * self.cutoff:
+                    x - picked, axis=1))) >= REPICK_CUTOFFS * self.cutoff:
                 # As in unconstrained: a path that moved far may near threats unseen.
                 self.pick_pairs(x)
                 picked = x
