@@ -78,9 +78,12 @@ def test_a_runner_up_is_finished_only_if_it_may_win():
     assert _runner_up_lead(problem, best, SimpleNamespace(final=_path(30.0))) is None
 
 
-@pytest.mark.parametrize('name, crowded', [('big300_0', True), ('uniform20_0', False)])
-def test_crowded_fields_are_minimised_without_the_preconditioner(name, crowded, monkeypatch):
-    """Its path-wide steps crossed threat cores on big300_0; elsewhere every run uses it."""
+@pytest.mark.parametrize('name, cut, smooth', [('big300_0', False, False),
+                                               ('uniform20_0', True, False),
+                                               ('uniform20_0', False, True)])
+def test_the_preconditioner_runs_only_on_uncrowded_fields_with_every_threat(
+        name, cut, smooth, monkeypatch):
+    """Its path-wide steps crossed threat cores on big300_0 and unseen ones under a cut-off."""
     from threat_planner.core import optimisation
     from threat_planner.core.limits import FlightLimits
     from threat_planner.core.smoothing import resample
@@ -96,5 +99,5 @@ def test_crowded_fields_are_minimised_without_the_preconditioner(name, crowded, 
     sc = load_scenario(DATA / f'{name}.yaml')
     x0 = resample(np.vstack([sc.start, sc.goal]), 20)
     optimisation.minimise_cost(x0, sc.threats, 0.5, sc.box, FlightLimits(30.0, 30.0, 10.0),
-                               cutoff=3.0 * sc.threats.typical_spacing(sc.box))
-    assert seen and set(seen) == {not crowded}
+                               cutoff=3.0 * sc.threats.typical_spacing(sc.box) if cut else None)
+    assert seen and set(seen) == {smooth}

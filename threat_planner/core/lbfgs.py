@@ -14,7 +14,8 @@ curvature pairs with s.y <= 0 are skipped. The initial inverse Hessian is the in
 the path's second-difference matrix (the Hessian of a spring chain; a tridiagonal solve
 per axis) rather than a multiple of the identity: the length and spacing terms couple
 neighbours, which conditions the problem as n^2 (measured on the 21 bundled cases: 25 %
-fewer segment-evaluations at the median, with limits on and off, J equal or lower). It
+fewer segment-evaluations at the median, with limits on and off, J equal or lower; the
+caller turns it off on crowded fields and under a cut-off, see :mod:`.optimisation`). It
 stops, like L-BFGS-B, when an iteration lowers the objective by less than ``ftol`` of it
 or the largest free gradient component is below ``gtol``. The path's ends are variables
 with equal bounds, so they never move.

@@ -52,11 +52,6 @@ COARSE_LEVEL_TOLERANCE = 1e-5
 #: Longest move of a vertex per L-BFGS iteration, in box diagonals: longer steps carried
 #: vertices across threats' cores on big300_0 (J 30 to 10^6 times the direct one's).
 MAX_STEP = 0.05
-#: Under a cut-off, one preconditioned L-BFGS run moves each coordinate at most this many
-#: cut-offs from where the pairs were picked (then they are picked again): unbounded, the
-#: runs carried paths 400-700 m into threats they did not see (10,000 threats, J 3.5x the
-#: start's); measured against 0.25 on big300_0 and 1,000-3,000 threats, 0.5 kept J lower.
-TRUST_CUTOFFS = 0.5
 #: Under a cut-off, the pairs are picked again once a vertex moved this many cut-offs.
 REPICK_CUTOFFS = 0.25
 #: Median threat reach over the typical spacing from which a field counts as crowded.
@@ -157,10 +152,14 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     if n < 3:
         return OptimisationResult(x, 0, 0, 0)
     stats = _Stats()
-    # Crowded fields: no preconditioning (its smooth, path-wide steps crossed threat
-    # cores on big300_0: J +0.5 % and +1.1 % with the limits off) and no coarse levels.
+    # The preconditioner's smooth, path-wide steps only where every threat is counted and
+    # the field is not crowded: on big300_0 they crossed threat cores (limits off J +0.5 %
+    # and +1.1 %); under a cut-off they carried paths into threats the pairs did not hold
+    # (10,000 threats: J 3.5x the start's) and, kept within half a cut-off a run, made
+    # 1,000-threat replans take 0.25-1.3 s against 0.3-0.4 s without.
     crowded = _crowded(threats, box)
-    level = _Level(x, threats, w, box, limits, cutoff, tolerance, stats, not crowded)
+    smooth = not crowded and cutoff is None
+    level = _Level(x, threats, w, box, limits, cutoff, tolerance, stats, smooth)
     x = level.clip(x)
     skip = (constrained_only and limits.any_constraint
             and check_limits(x, limits, level.floor).feasible)
@@ -173,7 +172,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         counts.append(counts[-1] // 2)
     coarse = len(counts) > 1
     probe = _Level(resample(x, counts[-1]), threats, w, box, limits, cutoff,
-                   COARSE_LEVEL_TOLERANCE, stats, not crowded) if coarse else level
+                   COARSE_LEVEL_TOLERANCE, stats, smooth) if coarse else level
     lam, best = None, None
     if resume is not None:
         x, lam, best = resume.x, resume.lam, resume.best
@@ -208,8 +207,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
                 return stats.result(state.points, True, state)
         path = resample(x, count)
         lvl = level if finest else probe if count == probe.n - 1 else _Level(
-            path, threats, w, box, limits, cutoff, COARSE_LEVEL_TOLERANCE, stats,
-            not crowded)
+            path, threats, w, box, limits, cutoff, COARSE_LEVEL_TOLERANCE, stats, smooth)
         x, lam, best = lvl.constrained(path, lam, PENALTY_START, constrained_iterations,
                                        constrained_rounds, keep_start=skip and finest)
     if best is not None:
@@ -297,17 +295,11 @@ class _Level:
             lim, lam, gbuf, pgrad = self._off[0], self._off[1], self._off[1], self._off[2]
         else:
             lim, gbuf, pgrad = term.kernel_args(), np.zeros(term.rows), np.zeros((self.n, 3))
-        lo, hi = self.lo, self.hi
-        if self.cutoff is not None and self.precondition:
-            # The pairs hold near where they were picked: within TRUST_CUTOFFS of it.
-            r = TRUST_CUTOFFS * self.cutoff
-            lo, hi = np.maximum(lo, p - r), np.minimum(hi, p + r)
         z, _, nit, nfev = minimise(
-            np.ascontiguousarray(p, float).reshape(-1), np.ascontiguousarray(lo).reshape(-1),
-            np.ascontiguousarray(hi).reshape(-1), self.pairs[2], self.intensities, self.w,
-            self.pairs[:2], _FROZEN_C2, _FROZEN_C3, self.spring, even, scale, lim, lam, mu,
-            gbuf, pgrad, maxiter, self.tolerance, max_step=self.max_step,
-            precondition=self.precondition)
+            np.ascontiguousarray(p, float).reshape(-1), self.lo.reshape(-1),
+            self.hi.reshape(-1), self.pairs[2], self.intensities, self.w, self.pairs[:2],
+            _FROZEN_C2, _FROZEN_C3, self.spring, even, scale, lim, lam, mu, gbuf, pgrad,
+            maxiter, self.tolerance, max_step=self.max_step, precondition=self.precondition)
         self.stats.add(nit, nfev)
         return z.reshape(self.n, 3)
 
