@@ -213,6 +213,9 @@ def main() -> None:
     sc = load_scenario(ROOT / 'test' / 'data' / 'uniform20_0.yaml')
     for extra in ({}, NO_LIMITS):
         plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.5, **extra))
+    if not args.no_scale:
+        # The cut-off and parallel kernels of large fields too.
+        plan(*bt.scale_problem(1000), PlannerConfig(w=0.5))
     cold = twenty_threat_rows()
     scale = [] if args.no_scale else scale_rows()
     quality = quality_rows(cold)

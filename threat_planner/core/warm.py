@@ -12,7 +12,8 @@ WARM_BASIN_MARGIN in J (a 1 % move could swap them). That lead is the screening'
 the flight limits did not bind; where they did, the screening (which holds no turn radius)
 says nothing, and the lead is that of the best basin refined under the limits over the
 next distinct one refined under them (none refined: no lead, cold). The warm result is
-dropped for a cold plan when it breaks a limit the previous plan met.
+dropped for a cold plan when it breaks a limit the previous plan met. Crowded fields
+(threat reach at least the spacing, :func:`.optimisation.is_crowded`) always plan cold.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from threat_planner.core.optimisation import is_crowded
 from threat_planner.core.smoothing import resample
 from threat_planner.core.threats import Box, ThreatField
 
@@ -87,6 +89,10 @@ def warm_path(previous: object, threats: ThreatField, s: NDArray, t: NDArray, bo
         shift = float(np.max(np.linalg.norm(threats.positions - p_threats.positions, axis=1)))
         if shift > WARM_THREAT_SHIFT * diag:
             return None, f'cold: a threat moved {shift:.3g} m'
+    if is_crowded(threats, box):
+        # Measured on a random 1,000-threat field in a 100 m box: a 0.5 m start move
+        # changed the cold optimum by up to 20 %, and a warm replan came out 33 % above it.
+        return None, 'cold: crowded field (threat reach >= spacing), its basins shift'
     if previous.basin_margin == 0.0:
         return None, 'cold: the flight limits bound the previous plan, no second basin to compare'
     if previous.basin_margin < WARM_BASIN_MARGIN:
