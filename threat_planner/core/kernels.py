@@ -150,16 +150,24 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
 
 
 @njit(cache=True, inline='always')
-def _pair_integral(a, b, s, positions, i, c2, c3):
-    """Integral of ds / d^4 along segment s (a[s] -> b[s]) from threat i; inf on a hit."""
+def _unit(a, b, s):
+    """Length of segment s (a[s] -> b[s]) and its direction (zero for a zero length)."""
     dx = b[s, 0] - a[s, 0]
     dy = b[s, 1] - a[s, 1]
     dz = b[s, 2] - a[s, 2]
     ln = math.sqrt(dx * dx + dy * dy + dz * dz)
     if ln == 0:
+        return 0.0, 0.0, 0.0, 0.0
+    return ln, dx / ln, dy / ln, dz / ln
+
+
+@njit(cache=True, inline='always')
+def _pair_integral(a, b, s, positions, i, c2, c3):
+    """Integral of ds / d^4 along segment s (a[s] -> b[s]) from threat i; inf on a hit."""
+    ln, ux, uy, uz = _unit(a, b, s)
+    if ln == 0:
         return 0.0
-    return _along(a[s, 0], a[s, 1], a[s, 2], dx / ln, dy / ln, dz / ln, ln, positions, i,
-                  c2, c3)
+    return _along(a[s, 0], a[s, 1], a[s, 2], ux, uy, uz, ln, positions, i, c2, c3)
 
 
 @njit(cache=True, inline='always')
@@ -185,14 +193,10 @@ def _along(ax, ay, az, ux, uy, uz, ln, positions, i, c2, c3):
 @njit(cache=True, inline='always')
 def _segment_total(a, b, s, positions, f, c2, c3):
     """J_R of segment s over every threat (its direction computed once)."""
-    dx = b[s, 0] - a[s, 0]
-    dy = b[s, 1] - a[s, 1]
-    dz = b[s, 2] - a[s, 2]
-    ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+    ln, ux, uy, uz = _unit(a, b, s)
     if ln == 0:
         return 0.0
     ax, ay, az = a[s, 0], a[s, 1], a[s, 2]
-    ux, uy, uz = dx / ln, dy / ln, dz / ln
     total = 0.0
     for i in range(positions.shape[0]):
         total += f[i] * _along(ax, ay, az, ux, uy, uz, ln, positions, i, c2, c3)
