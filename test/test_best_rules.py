@@ -62,20 +62,22 @@ def test_crowded_fields_are_those_whose_threat_reach_exceeds_the_spacing(name, c
 
 def test_a_runner_up_is_finished_only_if_it_may_win():
     """Compared at the coarse level: same basin or clearly worse stops it, close goes on."""
-    from threat_planner.core.limits import FlightLimits
-
     class Costs(SimpleNamespace):
         def cost(self, points):
             return SimpleNamespace(J=self.j[round(float(points[4, 0] - 50.0), 3)])
 
-    problem = Costs(box=BOX, limits=FlightLimits(90.0, 90.0, 0.0),
+    problem = Costs(box=BOX,
                     j={0.0: 100.0, 0.5: 100.2, 20.0: 100.0 * (1 + 2 * RUNNER_UP_MARGIN),
                        30.0: 100.0 * (1 + RUNNER_UP_MARGIN / 2)})
     best = SimpleNamespace(level_state=SimpleNamespace(points=_path(0.0)))
-    assert _runner_up_lead(problem, best, SimpleNamespace(final=_path(0.5))) == 0.0
-    assert _runner_up_lead(problem, best, SimpleNamespace(final=_path(20.0))) == \
-        pytest.approx(2 * RUNNER_UP_MARGIN)
-    assert _runner_up_lead(problem, best, SimpleNamespace(final=_path(30.0))) is None
+
+    def part(bend, feasible=True):
+        return SimpleNamespace(final=_path(bend), limit_check=SimpleNamespace(feasible=feasible))
+
+    assert _runner_up_lead(problem, best, part(0.5)) == 0.0
+    assert _runner_up_lead(problem, best, part(20.0)) == pytest.approx(2 * RUNNER_UP_MARGIN)
+    assert _runner_up_lead(problem, best, part(30.0)) is None
+    assert _runner_up_lead(problem, best, part(30.0, feasible=False)) == 0.0
 
 
 @pytest.mark.parametrize('name, cut, smooth', [('big300_0', False, False),

@@ -152,9 +152,12 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     # The warm-start rule's lead: the screening's where the limits did not bind; where
     # they did, the slope-held screening's, capped by the lead over the next distinct
     # basin refined under the limits (none refined: no lead; see _refined_margin).
-    best.basin_margin = _refined_margin(p, best, refined, held_margin) if bound else margin
-    if runner_lead is not None and best.limit_check.feasible and bound:
+    if not bound:
+        best.basin_margin = margin
+    elif runner_lead is not None and best.limit_check.feasible:
         best.basin_margin = max(min(held_margin, runner_lead), 0.0)
+    else:
+        best.basin_margin = _refined_margin(p, best, refined, held_margin)
     if not best.limit_check.feasible:
         best = repair(p, best)
     p.clock.lap('optimisation_ms')
@@ -187,10 +190,7 @@ def _runner_up_lead(p: Problem, best: Candidate, part: Candidate) -> float | Non
     theirs = part.final
     if len(theirs) != len(mine):
         return None
-    if _same_basin(p, mine, theirs):
-        return 0.0
-    floor = float(p.box.lo[2])
-    if not check_limits(theirs, p.limits, floor).feasible:
+    if _same_basin(p, mine, theirs) or not part.limit_check.feasible:
         return 0.0
     j_best, j_part = p.cost(mine).J, p.cost(theirs).J
     if j_part > (1.0 + RUNNER_UP_MARGIN) * j_best:
