@@ -225,6 +225,11 @@ def _segment_costs_parallel(a, b, positions, f, c2, c3, out):
 #: Pairs per evaluation from which J and its gradient run on several threads (measured:
 #: 8 segments x 1,000 threats 761 -> 456 us, 40 x 1,000 3.6 -> 2.0 ms on 2 cores).
 PARALLEL_PAIRS = 4_000
+#: Pairs from which segment_costs runs on several threads, a call at a time: a parallel
+#: region woken between serial work paid for the wake-up on this shared host (a 20-threat
+#: network's 6,000 edge pairs: serial 0.8 ms a plan, parallel 1.1-1.3 ms when the host was
+#: quiet and 6-7.7 ms when it was busy).
+SEGMENT_PARALLEL_PAIRS = 20_000
 #: numba's default (workqueue) threading layer must not be entered by two threads at
 #: once (the plan service and the node may plan concurrently in one process).
 PARALLEL_LOCK = threading.Lock()
@@ -397,7 +402,7 @@ def segment_costs(a: NDArray, b: NDArray, positions: NDArray, intensities: NDArr
         seg = np.ascontiguousarray(pairs[0], np.int64)
         thr = np.ascontiguousarray(pairs[1], np.int64)
     b = np.ascontiguousarray(b, float)
-    if len(seg) == 0 and len(a) * len(positions) >= PARALLEL_PAIRS:
+    if len(seg) == 0 and len(a) * len(positions) >= SEGMENT_PARALLEL_PAIRS:
         with PARALLEL_LOCK:
             _segment_costs_parallel(a, b, _frozen(positions), _frozen(intensities),
                                     _FROZEN_C2, _FROZEN_C3, out)
@@ -440,5 +445,5 @@ def warm_up() -> None:
     segment_costs(pts[:-1], pts[1:], np.array([[1.0, 2.0, 0.0]]), np.array([1.0]))
     segment_costs(pts[:-1], pts[1:], np.array([[1.0, 2.0, 0.0]]), np.array([1.0]),
                   (np.array([0, 1]), np.array([0, 0])))
-    segment_costs(np.zeros((PARALLEL_PAIRS, 3)), np.ones((PARALLEL_PAIRS, 3)),
+    segment_costs(np.zeros((SEGMENT_PARALLEL_PAIRS, 3)), np.ones((SEGMENT_PARALLEL_PAIRS, 3)),
                   np.array([[1.0, 2.0, 0.0]]), np.array([1.0]))
