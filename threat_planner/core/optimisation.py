@@ -370,7 +370,7 @@ def is_crowded(threats: ThreatField, box: Box | None) -> bool:
     """Whether the median threat's reach F^(1/4) [m] is CROWDED_REACH of the spacing."""
     if box is None or len(threats) == 0:
         return False
-    reach = float(np.median(threats.intensities)) ** 0.25
+    reach = threats.median_intensity ** 0.25
     return reach >= CROWDED_REACH * threats.typical_spacing(box)
 
 

@@ -6,11 +6,12 @@ The methods themselves are in :mod:`threat_planner.core.methods`; settings in
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 from threat_planner.core.airspace import Airspace
 from threat_planner.core.config import PlannerConfig
@@ -95,7 +96,7 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         airspace = None
     # The optimisers make thousands of tiny BLAS calls; a threaded BLAS spends longer waking
     # its threads than computing, and far longer when the cores are busy (measured: 4x).
-    with threadpool_limits(1, user_api='blas'):
+    with _blas().limit(limits=1, user_api='blas'):
         note = ''
         if warm_start is not None and airspace is None:
             warm = _plan_warm(warm_start, threats, s, t, box, config)
@@ -105,6 +106,12 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         result = _plan(threats, s, t, box, config, progress, airspace, on_initial)
         result.warm_note = note
         return result
+
+
+@lru_cache(maxsize=1)
+def _blas() -> ThreadpoolController:
+    """The loaded BLAS libraries, found once (finding them cost 0.9 ms a plan)."""
+    return ThreadpoolController()
 
 
 def _plan_warm(previous: PlanResult, threats: ThreatField, s: NDArray, t: NDArray, box: Box,

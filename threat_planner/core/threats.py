@@ -178,6 +178,11 @@ class ThreatField:
         """Sum of all intensities F."""
         return float(self.intensities.sum())
 
+    @cached_property
+    def median_intensity(self) -> float:
+        """Median intensity F (0 without threats)."""
+        return float(np.median(self.intensities)) if len(self) else 0.0
+
     def received_power(self, points: ArrayLike, q: float = 1.0) -> NDArray:
         """Radar power received from a target at each point, sum_i Q F_i / R_i^4 (eq. 3).
 
