@@ -69,15 +69,29 @@ def test_a_runner_up_is_finished_only_if_it_may_win():
     problem = Costs(box=BOX,
                     j={0.0: 100.0, 0.5: 100.2, 20.0: 100.0 * (1 + 2 * RUNNER_UP_MARGIN),
                        30.0: 100.0 * (1 + RUNNER_UP_MARGIN / 2)})
-    best = SimpleNamespace(level_state=SimpleNamespace(points=_path(0.0)))
+    mine = _path(0.0)
+    assert _runner_up_lead(problem, mine, _path(0.5), True) == 0.0
+    assert _runner_up_lead(problem, mine, _path(20.0), True) == pytest.approx(
+        2 * RUNNER_UP_MARGIN)
+    assert _runner_up_lead(problem, mine, _path(30.0), True) is None
+    assert _runner_up_lead(problem, mine, _path(30.0), False) == 0.0
 
-    def part(bend, feasible=True):
-        return SimpleNamespace(final=_path(bend), limit_check=SimpleNamespace(feasible=feasible))
 
-    assert _runner_up_lead(problem, best, part(0.5)) == 0.0
-    assert _runner_up_lead(problem, best, part(20.0)) == pytest.approx(2 * RUNNER_UP_MARGIN)
-    assert _runner_up_lead(problem, best, part(30.0)) is None
-    assert _runner_up_lead(problem, best, part(30.0, feasible=False)) == 0.0
+def test_the_runner_up_gate_compares_level_by_level_and_records_its_verdict():
+    """A level best has no answer for goes on; a clearly worse one stops with its lead."""
+    from threat_planner.core.best import _runner_up_gate
+
+    class Costs(SimpleNamespace):
+        def cost(self, points):
+            return SimpleNamespace(J=100.0 + float(np.max(points[:, 0] - points[:, 1])))
+
+        def check(self, points):
+            return SimpleNamespace(feasible=True)
+
+    verdict = []
+    gate = _runner_up_gate(Costs(box=BOX), (_path(0.0)[::2],), verdict)
+    assert gate(_path(20.0)) is False and verdict == []      # no answer of best at 9 points
+    assert gate(_path(20.0)[::2]) is True and verdict == [pytest.approx(0.2)]
 
 
 @pytest.mark.parametrize('name, cut, smooth', [('big300_0', False, False),

@@ -51,14 +51,65 @@ def test_box_binds_when_the_threat_fills_it(problem):
     assert j_free <= j_in
 
 
-def test_the_fine_level_resumed_from_the_coarse_state_is_the_full_run(problem):
-    """stop_before_finest, then resume: the same path as one uninterrupted minimisation."""
+def test_a_gate_sees_every_coarser_level_and_stops_where_it_says(problem):
+    """A gate that never fires changes nothing; one that fires returns that level's answer."""
     threats, box, start, goal = problem
     x0 = resample(np.vstack([start, [60.0, 40.0, 65.0], goal]), 40)
     limits = FlightLimits(8.0, 8.0, 20.0, 0.0)
     full = minimise_cost(x0, threats, 0.5, box, limits)
-    part = minimise_cost(x0, threats, 0.5, box, limits, stop_before_finest=True)
-    assert full.constrained and part.state is not None
-    assert len(part.points) == 21                       # the 20-segment level's answer
-    rest = minimise_cost(x0, threats, 0.5, box, limits, resume=part.state)
-    np.testing.assert_array_equal(rest.points, full.points)
+    seen = []
+    watched = minimise_cost(x0, threats, 0.5, box, limits,
+                            gate=lambda pts: seen.append(len(pts)) or False)
+    assert full.constrained and seen == [11, 21]           # the 10- and 20-segment levels
+    np.testing.assert_array_equal(watched.points, full.points)
+    assert [len(a) for a in full.levels] == [11, 21]
+    stopped = minimise_cost(x0, threats, 0.5, box, limits, gate=lambda pts: len(pts) == 21)
+    assert len(stopped.points) == 21 and len(stopped.levels) == 2
+    np.testing.assert_array_equal(stopped.points, full.levels[1])
+    assert stopped.evaluations < full.evaluations
+
+
+def test_prolongation_keeps_a_coarse_arc_s_turn_radius_where_linear_halves_it():
+    """Into the finest level: subdivision spreads each turn, interpolation concentrates it."""
+    from threat_planner.core.limit_kernels import measure
+    from threat_planner.core.optimisation import _prolong
+    radius = 30.0
+    a = np.linspace(0.0, np.pi / 2, 11)
+    coarse = np.stack([radius * np.cos(a), radius * np.sin(a), 2.0 * a], axis=1)
+    r_coarse = measure(coarse, -1e9)[2]
+    fine = _prolong(coarse, 20)
+    assert len(fine) == 21
+    np.testing.assert_array_equal(fine[[0, -1]], coarse[[0, -1]])
+    # Convex combinations of coarse vertices: inside their bounding box.
+    assert np.all(fine >= coarse.min(axis=0) - 1e-12)
+    assert np.all(fine <= coarse.max(axis=0) + 1e-12)
+    assert measure(fine, -1e9)[2] >= 0.95 * r_coarse
+    assert measure(resample(coarse, 20), -1e9)[2] <= 0.55 * r_coarse
+    # Not a doubling: plain resampling.
+    np.testing.assert_allclose(_prolong(coarse, 15), resample(coarse, 15))
+
+
+def test_the_constrained_answer_is_the_least_j_feasible_round(problem, monkeypatch):
+    """Every feasible round's J is recorded; the one returned is the least of them."""
+    from threat_planner.core import optimisation as opt
+    threats, box, start, goal = problem
+    limits = FlightLimits(8.0, 8.0, 20.0, 0.0)
+    seen = []
+    original = opt._Level.run
+
+    def spy(self, p, even, scale, maxiter, term=None, lam=None, mu=1.0):
+        z = original(self, p, even, scale, maxiter, term, lam, mu)
+        if check_limits(z, limits, 0.0).feasible:
+            seen.append(path_cost(z, threats.positions, threats.intensities, 0.5).J)
+        return z
+
+    monkeypatch.setattr(opt._Level, 'run', spy)
+    x0 = resample(np.vstack([start, [60.0, 40.0, 65.0], goal]), 20)
+    level = opt._Level(x0, threats, 0.5, box, limits, None, 1e-6, opt._Stats())
+    _, _, best = level.constrained(x0, None, opt.PENALTY_START, 200)
+    assert len(seen) >= 2
+    j = path_cost(best, threats.positions, threats.intensities, 0.5).J
+    assert j == pytest.approx(min(seen), rel=1e-12)
+    seen.clear()
+    _, _, first = level.constrained(x0, None, opt.PENALTY_START, 200, first_feasible=True)
+    assert len(seen) == 1 and check_limits(first, limits, 0.0).feasible

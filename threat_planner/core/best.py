@@ -10,6 +10,8 @@ beating any infeasible one, with a blend towards the straight line as the last r
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -39,9 +41,9 @@ OPTIMISER_CUTOFF_SPACINGS = 3.0
 FEASIBILITY_TRIES = 3
 #: Basins refined when the limits bind (the best feasible one kept).
 BOUND_BASINS = 2
-#: A runner-up basin this much above the best at the coarse levels is not refined at the
-#: finest (on the 21 bundled cases 12 runners-up were in the winner's basin there, 2 were
-#: 22 % and 115 % above it, 2 were refined to the end).
+#: A runner-up basin this much above the best at a coarse level is not refined further
+#: (on the 21 bundled cases, at the coarsest level 12 of 16 runners-up were in the winner's
+#: basin and 2 were 22 % and 124 % above it; 2 were refined to the end).
 RUNNER_UP_MARGIN = 0.01
 #: Bisection steps of the last-resort repair towards the straight line.
 REPAIR_BISECTIONS = 20
@@ -128,15 +130,15 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     bound, refined, runner_lead = False, [], None
     for name, seq, coarse in order[:FEASIBILITY_TRIES]:
         start = resample(coarse, cfg.n_points)
-        if best is not None and bound and best.limit_check.feasible \
-                and best.level_state is not None:
-            # The runner-up basin: its coarse levels first, the fine level only if it
-            # may win (measured: most runners-up ended in the winner's basin).
-            part = refine(p, start, seq or routes[0], name, stop_before_finest=True)
-            runner_lead = _runner_up_lead(p, best, part)
-            if runner_lead is not None:
+        if best is not None and bound and best.limit_check.feasible and best.levels:
+            # The runner-up basin level by level, the finer levels only while it may win
+            # (measured: most runners-up were in the winner's basin from the coarsest).
+            verdict: list[float] = []
+            cand = refine(p, start, seq or routes[0], name,
+                          gate=_runner_up_gate(p, best.levels, verdict))
+            if verdict:
+                runner_lead = verdict[0]
                 break
-            cand = refine(p, start, seq or routes[0], name, resume=part.level_state)
         else:
             cand = refine(p, start, seq or routes[0], name)
         bound = bound or cand.limits_bound
@@ -178,19 +180,33 @@ def _lead(p: Problem, ranked: list[tuple[float, NDArray]]) -> float:
     return float('inf')
 
 
-def _runner_up_lead(p: Problem, best: Candidate, part: Candidate) -> float | None:
-    """Decide on a runner-up refined to the coarse levels: None to refine it to the end.
+def _runner_up_gate(p: Problem, answers: tuple, verdict: list) -> Callable[[NDArray], bool]:
+    """Return the refine gate of a runner-up against best's answers level by level.
 
-    Both are compared at the level before the finest. Otherwise the warm-start lead it
-    leaves best: 0 when it is in best's basin there or breaks the limits (no distinct
-    feasible rival known, as :func:`_refined_margin`), else its relative J excess when
-    that is more than RUNNER_UP_MARGIN.
+    It stops the runner-up at a level (its warm-start lead appended to ``verdict``) as
+    soon as :func:`_runner_up_lead` tells, against best's answer at the same level.
     """
-    mine = best.level_state.points
-    theirs = part.final
-    if len(theirs) != len(mine):
-        return None
-    if _same_basin(p, mine, theirs) or not part.limit_check.feasible:
+    mine = {len(a): a for a in answers}
+
+    def gate(points: NDArray) -> bool:
+        lead = None if len(points) not in mine else _runner_up_lead(
+            p, mine[len(points)], points, p.check(points).feasible)
+        if lead is not None:
+            verdict.append(lead)
+        return lead is not None
+    return gate
+
+
+def _runner_up_lead(p: Problem, mine: NDArray, theirs: NDArray, feasible: bool
+                    ) -> float | None:
+    """Decide on a runner-up at a coarse level: None to refine it further.
+
+    ``mine`` is best's answer and ``theirs`` the runner-up's at the same level. Otherwise
+    the warm-start lead it leaves best: 0 when it is in best's basin there or breaks the
+    limits (no distinct feasible rival known, as :func:`_refined_margin`), else its
+    relative J excess when that is more than RUNNER_UP_MARGIN.
+    """
+    if _same_basin(p, mine, theirs) or not feasible:
         return 0.0
     j_best, j_part = p.cost(mine).J, p.cost(theirs).J
     if j_part > (1.0 + RUNNER_UP_MARGIN) * j_best:
@@ -297,8 +313,8 @@ def repair(p: Problem, cand: Candidate) -> Candidate:
 
 
 def refine(p: Problem, start: NDArray, seq: list[int], name: str,
-           tolerance: float = 1e-6, warm: bool = False, stop_before_finest: bool = False,
-           resume: object = None) -> Candidate:
+           tolerance: float = 1e-6, warm: bool = False,
+           gate: Callable[[NDArray], bool] | None = None) -> Candidate:
     """Minimise J from a path of n_points segments inside the box and the flight limits.
 
     Parameters
@@ -315,9 +331,9 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
         Relative J decrease per iteration below which L-BFGS stops.
     warm : bool
         The start is a previous plan: straight to the constrained rounds if it is feasible.
-    stop_before_finest, resume
-        As :func:`.optimisation.minimise_cost`: the coarse levels only (the candidate's
-        path is then at that level's resolution), or the rest from such a state.
+    gate : callable, optional
+        As :func:`.optimisation.minimise_cost`: stops at a coarser level (the candidate's
+        path then at that level's resolution).
 
     Returns
     -------
@@ -329,10 +345,10 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
                         p.limits, tolerance=tolerance, constrained_only=warm,
                         cutoff=_optimiser_cutoff(cfg.n_points, p.threats,
                                                  p.threats.typical_spacing(p.box)),
-                        stop_before_finest=stop_before_finest, resume=resume)
+                        gate=gate)
     return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
                      smoothed=None, smoothed_cost=None, final=opt.points, k=float('nan'),
                      steps=0, converged=True, cost=p.cost(opt.points),
                      angles=check_angles(opt.points, cfg.max_pitch_deg, cfg.max_turn_deg),
                      seed=name, limit_check=p.check(opt.points),
-                     limits_bound=opt.constrained, level_state=opt.state)
+                     limits_bound=opt.constrained, levels=opt.levels)

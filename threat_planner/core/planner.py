@@ -110,7 +110,7 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
 
 @lru_cache(maxsize=1)
 def _blas() -> ThreadpoolController:
-    """The loaded BLAS libraries, found once (finding them cost 0.9 ms a plan)."""
+    """Return the loaded BLAS libraries, found once (finding them cost 0.9 ms a plan)."""
     return ThreadpoolController()
 
 

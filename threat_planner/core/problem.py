@@ -101,8 +101,8 @@ class Candidate:
     basin_margin: float = float('inf')
     #: The flight limits bound in the final minimisation ('best').
     limits_bound: bool = False
-    #: Its constrained stage before the finest level (optimisation.LevelState), if any.
-    level_state: object = None
+    #: Its answers at the coarser levels under binding limits, coarsest first.
+    levels: tuple = ()
 
 
 def smooth_route(p: Problem, seq: list[int], k: float) -> Candidate:
