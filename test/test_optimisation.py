@@ -113,3 +113,22 @@ def test_the_constrained_answer_is_the_least_j_feasible_round(problem, monkeypat
     seen.clear()
     _, _, first = level.constrained(x0, None, opt.PENALTY_START, 200, first_feasible=True)
     assert len(seen) == 1 and check_limits(first, limits, 0.0).feasible
+
+
+def test_a_known_broken_box_optimum_goes_straight_to_the_rounds(problem, monkeypatch):
+    """box_broken: no box-only run, and still a feasible answer below the start's J."""
+    from threat_planner.core import optimisation as opt
+    threats, box, start, goal = problem
+    limits = FlightLimits(8.0, 8.0, 20.0, 0.0)
+    x0 = resample(np.vstack([start, [60.0, 40.0, 55.0], goal]), 20)
+    calls = []
+    original = opt._Level.unconstrained
+    monkeypatch.setattr(opt._Level, 'unconstrained',
+                        lambda self, x, maxiter: calls.append(1) or original(self, x, maxiter))
+    res = minimise_cost(x0, threats, 0.5, box, limits, box_broken=True)
+    assert calls == [] and res.constrained
+    assert check_limits(res.points, limits, 0.0).feasible
+    j0 = path_cost(x0, threats.positions, threats.intensities, 0.5).J
+    assert path_cost(res.points, threats.positions, threats.intensities, 0.5).J < j0
+    minimise_cost(x0, threats, 0.5, box, limits)
+    assert calls                                   # without it the box-only run comes first

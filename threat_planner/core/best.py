@@ -118,7 +118,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     # same basin end within 1 % of the diagonal of each other): the warm-start rule.
     # (Surface routes have their own point counts: compare at the coarse resolution.)
     margin = _lead(p, [(j, path) for j, _, _, path in screened])
-    order = [(name, seq, coarse) for _, name, seq, coarse in screened]
+    order = [(name, seq, coarse, False) for _, name, seq, coarse in screened]
     held_margin = 0.0
     if p.limits.climb_on or p.limits.dive_on:
         held, held_margin = _slope_screening(p, screened, bounds, cutoff)
@@ -128,19 +128,19 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     p.clock.lap('screening_ms')
     best: Candidate | None = None
     bound, refined, runner_lead = False, [], None
-    for name, seq, coarse in order[:FEASIBILITY_TRIES]:
+    for name, seq, coarse, broken in order[:FEASIBILITY_TRIES]:
         start = resample(coarse, cfg.n_points)
         if best is not None and bound and best.limit_check.feasible and best.levels:
             # The runner-up basin level by level, the finer levels only while it may win
             # (measured: most runners-up were in the winner's basin from the coarsest).
             verdict: list[float] = []
-            cand = refine(p, start, seq or routes[0], name,
+            cand = refine(p, start, seq or routes[0], name, box_broken=broken,
                           gate=_runner_up_gate(p, best.levels, verdict))
             if verdict:
                 runner_lead = verdict[0]
                 break
         else:
-            cand = refine(p, start, seq or routes[0], name)
+            cand = refine(p, start, seq or routes[0], name, box_broken=broken)
         bound = bound or cand.limits_bound
         refined.append(cand)
         if best is None or ((cand.limit_check.feasible, -cand.cost.J)
@@ -258,13 +258,14 @@ def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: flo
         if any(_same_basin(p, coarse, k) for k in kept):
             continue
         kept.append(coarse)
-        path = minimise_cost(resample(coarse, COARSE_SEGMENTS), p.threats, p.config.w,
-                             bounds, slopes, cutoff=cutoff,
-                             constrained_iterations=SLOPE_SCREEN_ITERATIONS,
-                             constrained_rounds=SLOPE_SCREEN_ROUNDS,
-                             tolerance=COARSE_TOLERANCE).points
-        ok = check_limits(path, slopes, floor).feasible
-        held.append((not ok, p.cost(path).J, f'{name} (slopes held)', seq, path))
+        res = minimise_cost(resample(coarse, COARSE_SEGMENTS), p.threats, p.config.w,
+                            bounds, slopes, cutoff=cutoff,
+                            constrained_iterations=SLOPE_SCREEN_ITERATIONS,
+                            constrained_rounds=SLOPE_SCREEN_ROUNDS,
+                            tolerance=COARSE_TOLERANCE)
+        ok = check_limits(res.points, slopes, floor).feasible
+        held.append((not ok, p.cost(res.points).J, f'{name} (slopes held)', seq, res.points,
+                     res.constrained))
     held.sort(key=lambda item: item[:2])
     feasible = [(item[1], item[4]) for item in held if not item[0]]
     lead = _lead(p, feasible) if feasible else 0.0
@@ -313,7 +314,7 @@ def repair(p: Problem, cand: Candidate) -> Candidate:
 
 
 def refine(p: Problem, start: NDArray, seq: list[int], name: str,
-           tolerance: float = 1e-6, warm: bool = False,
+           tolerance: float = 1e-6, warm: bool = False, box_broken: bool = False,
            gate: Callable[[NDArray], bool] | None = None) -> Candidate:
     """Minimise J from a path of n_points segments inside the box and the flight limits.
 
@@ -331,9 +332,9 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
         Relative J decrease per iteration below which L-BFGS stops.
     warm : bool
         The start is a previous plan: straight to the constrained rounds if it is feasible.
-    gate : callable, optional
-        As :func:`.optimisation.minimise_cost`: stops at a coarser level (the candidate's
-        path then at that level's resolution).
+    box_broken, gate
+        As :func:`.optimisation.minimise_cost`: the basin's box-only optimum breaks the
+        limits; stop at a coarser level (the candidate's path then at its resolution).
 
     Returns
     -------
@@ -345,7 +346,7 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
                         p.limits, tolerance=tolerance, constrained_only=warm,
                         cutoff=_optimiser_cutoff(cfg.n_points, p.threats,
                                                  p.threats.typical_spacing(p.box)),
-                        gate=gate)
+                        box_broken=box_broken, gate=gate)
     return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
                      smoothed=None, smoothed_cost=None, final=opt.points, k=float('nan'),
                      steps=0, converged=True, cost=p.cost(opt.points),

@@ -93,7 +93,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
                   limits: FlightLimits | None = None, cutoff: float | None = None,
                   max_iterations: int = 1000, tolerance: float = 1e-6,
                   constrained_iterations: int = 200, constrained_rounds: int = MAX_OUTER,
-                  constrained_only: bool = False,
+                  constrained_only: bool = False, box_broken: bool = False,
                   gate: Callable[[NDArray], bool] | None = None) -> OptimisationResult:
     """Minimise J over the interior vertices within the box and the flight limits.
 
@@ -123,6 +123,9 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     constrained_only : bool
         Skip the box-only run when the start meets the limits (a warm start near the
         constrained optimum: the box-only run would leave it and the rounds come back).
+    box_broken : bool
+        The box-only optimum of the start's basin is known to break the limits (a seed
+        the slope-held screening had to hold): no box-only run, the rounds start from it.
     gate : callable, optional
         Called with each coarser level's answer under binding limits; True stops there
         (``points`` that answer), for a caller that decides level by level whether the
@@ -161,7 +164,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     probe = _Level(resample(x, counts[-1]), threats, w, box, limits, cutoff,
                    COARSE_LEVEL_TOLERANCE, stats, smooth) if coarse else level
     lam, best = None, None
-    if not skip:
+    if not skip and not (box_broken and limits.any_constraint):
         given = x
         # The box-only optimum, at the coarsest level first: the answer where it meets
         # the limits, else the start of the constrained rounds (at 40 segments under
