@@ -117,3 +117,17 @@ def test_the_preconditioner_runs_only_on_uncrowded_fields_with_every_threat(
     optimisation.minimise_cost(x0, sc.threats, 0.5, sc.box, FlightLimits(30.0, 30.0, 10.0),
                                cutoff=3.0 * sc.threats.typical_spacing(sc.box) if cut else None)
     assert seen and set(seen) == {smooth}
+
+
+@pytest.mark.parametrize('name, held', [('big300_0', False), ('uniform20_0', True)])
+def test_the_slope_held_screening_runs_only_outside_crowded_fields(name, held, monkeypatch):
+    """8 segments misrank a crowded field's basins: there the box-only ranking is used."""
+    from threat_planner.core import best
+    from threat_planner.core.planner import plan, PlannerConfig
+    calls = []
+    real = best._slope_screening
+    monkeypatch.setattr(best, '_slope_screening',
+                        lambda *a: calls.append(1) or real(*a))
+    sc = load_scenario(DATA / f'{name}.yaml')
+    result = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.5))
+    assert bool(calls) == held and result.feasible

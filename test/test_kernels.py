@@ -211,3 +211,30 @@ def test_preconditioner_solves_the_second_difference_system_of_the_free_vertices
         np.testing.assert_allclose(out[cols], np.linalg.solve(lap[np.ix_(idx, idx)], v[cols]),
                                    rtol=1e-12, atol=1e-12)
     assert np.all(out[free == 0.0] == 0.0)
+
+
+def test_lbfgs_stops_at_the_first_iterate_beyond_reach():
+    """Every iterate before the last is within reach; the last is the first one out."""
+    x, pos, f, _ = _problem(with_limits=False)
+    n1 = len(x)
+    lo = np.full(3 * n1, -np.inf)
+    hi = np.full(3 * n1, np.inf)
+    lo[:3] = hi[:3] = x[0]
+    lo[-3:] = hi[-3:] = x[-1]
+    off = np.zeros(7), np.zeros(0), np.zeros((n1, 3))
+    start = x.reshape(-1).copy()
+
+    def run(iterations, reach=np.inf):
+        return minimise(start, lo, hi, pos, f, 0.5, (_NO_PAIRS, _NO_PAIRS), _FROZEN_C2,
+                        _FROZEN_C3, 0.0, 0.0, 1.0, off[0], off[1], 1.0, off[1], off[2],
+                        iterations, 0.0, max_step=0.5, reach=reach)
+
+    free = run(200)
+    far = np.linalg.norm((free[0] - start).reshape(n1, 3), axis=1).max()
+    assert far > 2.0
+    z, _, nit, _ = run(200, reach=1.0)
+    assert nit < free[2]
+    np.testing.assert_array_equal(z, run(nit)[0])          # the same iterates up to there
+    out = lambda y: np.linalg.norm((y - start).reshape(n1, 3), axis=1).max()  # noqa: E731
+    assert 1.0 < out(z) <= 1.5 + 1e-12
+    assert out(run(nit - 1)[0]) <= 1.0

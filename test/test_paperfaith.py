@@ -139,10 +139,17 @@ def test_surface_routes_run_from_start_to_goal_over_the_box_surface(name):
 
 
 def test_surface_seed_wins_on_the_dense_field_and_beats_the_network_routes():
+    """The in-box optimum (no flight limits) climbs along the box; with limits, no loss."""
     sc = load_scenario(DATA / 'big300_0.yaml')
-    cfg = dict(w=0.5, max_pitch_deg=90.0, max_turn_deg=180.0)
-    with_seeds = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(**cfg))
-    without = plan(sc.threats, sc.start, sc.goal, sc.box,
-                   PlannerConfig(surface_seeds=False, **cfg))
-    assert with_seeds.seed.startswith('surface route')
-    assert with_seeds.cost.J < without.cost.J
+    off = dict(max_climb_deg=90.0, max_dive_deg=90.0, min_turn_radius_m=0.0)
+    for limited in (False, True):
+        cfg = dict(w=0.5, max_pitch_deg=90.0, max_turn_deg=180.0, **({} if limited else off))
+        with_seeds = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(**cfg))
+        without = plan(sc.threats, sc.start, sc.goal, sc.box,
+                       PlannerConfig(surface_seeds=False, **cfg))
+        if limited:
+            assert with_seeds.feasible
+            assert with_seeds.cost.J <= without.cost.J * (1 + 1e-9)
+        else:
+            assert with_seeds.seed.startswith('surface route')
+            assert with_seeds.cost.J < without.cost.J

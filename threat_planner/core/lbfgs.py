@@ -127,11 +127,11 @@ def _tri_solve(v, free, n1, out, cp, dp):
 
 @njit(cache=True)
 def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale, lim,
-              lam, mu, gbuf, pgrad, maxiter, ftol, gtol, m, max_step, pre, out):
+              lam, mu, gbuf, pgrad, maxiter, ftol, gtol, m, max_step, pre, reach, out):
     """Projected L-BFGS from x0 within [lo, hi] (preconditioned if pre); minimiser into out.
 
     Returns (value, iterations, evaluations, why it stopped: 0 small decrease, 1 small
-    gradient, 2 no step accepted, 3 iteration limit).
+    gradient, 2 no step accepted, 3 iteration limit, 4 a vertex moved beyond reach).
     """
     nv = x0.shape[0]
     n1 = nv // 3
@@ -285,6 +285,14 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
         x[:] = xn
         g[:] = gn
         fx = fn
+        if reach < math.inf:
+            far = 0.0
+            for k in range(0, nv, 3):
+                far = max(far, (x[k] - x0[k]) ** 2 + (x[k + 1] - x0[k + 1]) ** 2
+                          + (x[k + 2] - x0[k + 2]) ** 2)
+            if far > reach * reach:
+                status = 4
+                break
         # A small decrease after a backtracked step says more about the step than about
         # the minimum: stop on the third in a row, or on one after a full step.
         small = small + 1 if decrease <= ftol else 0
@@ -305,7 +313,7 @@ def objective(x, n1, positions, f, w, pairs, c2, c3, spring, even, scale, lim, l
 
 def minimise(x0, lo, hi, positions, f, w, pairs, c2, c3, spring, even, scale, lim, lam, mu,
              gbuf, pgrad, maxiter, ftol, gtol=1e-7, memory=20, max_step=math.inf,
-             precondition=True):
+             precondition=True, reach=math.inf):
     """Run :func:`_minimise`; returns ``(x, value, iterations, evaluations)``.
 
     Parameters are those of the objective: ``x0``, ``lo``, ``hi`` flat (3 (n+1),) [m];
@@ -313,7 +321,9 @@ def minimise(x0, lo, hi, positions, f, w, pairs, c2, c3, spring, even, scale, li
     term's (sin climb, sin dive, min radius, climb on, dive on, radius on, term on);
     ``lam``, ``mu`` its multipliers and penalty; ``gbuf`` (rows,) and ``pgrad`` (n+1, 3)
     its scratch space; ``max_step`` the longest move of a vertex per iteration [m];
-    ``precondition`` False for the plain identity-scaled start of the recursion.
+    ``precondition`` False for the plain identity-scaled start of the recursion; ``reach``
+    how far a vertex may get from x0 before the run stops [m] (a cut-off's pairs hold
+    only near where they were picked).
     """
     out = np.empty_like(x0)
     with parallel_guard(len(pairs[0]) or (len(x0) // 3 - 1) * len(positions)):
@@ -321,5 +331,6 @@ def minimise(x0, lo, hi, positions, f, w, pairs, c2, c3, spring, even, scale, li
                                       pairs[1], c2, c3, float(spring), float(even),
                                       float(scale), lim, lam, float(mu), gbuf, pgrad,
                                       int(maxiter), float(ftol), float(gtol), int(memory),
-                                      float(max_step), bool(precondition), out)
+                                      float(max_step), bool(precondition), float(reach),
+                                      out)
     return out, float(val), int(nit), int(nfev)
