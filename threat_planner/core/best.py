@@ -218,10 +218,13 @@ def _runner_up_lead(p: Problem, mine: NDArray, theirs: NDArray, feasible: bool
     return None
 
 
-def _same_basin(p: Problem, a: NDArray, b: NDArray) -> bool:
-    """Whether two paths lie within 1 % of the box diagonal (compared at 8 segments)."""
-    gap = resample(a, COARSE_SEGMENTS) - resample(b, COARSE_SEGMENTS)
-    return bool(np.max(np.linalg.norm(gap, axis=1)) <= 0.01 * p.box.diagonal)
+def _same_basin(p: Problem, a: NDArray, b: NDArray, resampled: bool = False) -> bool:
+    """Whether two paths lie within 1 % of the box diagonal (compared at 8 segments).
+
+    ``resampled``: both are :func:`resample` d to COARSE_SEGMENTS already.
+    """
+    gap = a - b if resampled else resample(a, COARSE_SEGMENTS) - resample(b, COARSE_SEGMENTS)
+    return float(np.max(np.einsum('ij,ij->i', gap, gap))) <= (0.01 * p.box.diagonal) ** 2
 
 
 def _refined_margin(p: Problem, best: Candidate, refined: list[Candidate],
@@ -259,9 +262,10 @@ def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: flo
     kept: list[NDArray] = []
     for _, name, seq, coarse in screened:
         # A seed that screened into the basin of a better-ranked one would repeat its run.
-        if any(_same_basin(p, coarse, k) for k in kept):
+        key = resample(coarse, COARSE_SEGMENTS)
+        if any(_same_basin(p, key, k, resampled=True) for k in kept):
             continue
-        kept.append(coarse)
+        kept.append(key)
         res = minimise_cost(resample(coarse, COARSE_SEGMENTS), p.threats, p.config.w,
                             bounds, slopes, cutoff=cutoff,
                             constrained_iterations=SLOPE_SCREEN_ITERATIONS,
