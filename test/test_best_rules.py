@@ -131,3 +131,17 @@ def test_the_slope_held_screening_runs_only_outside_crowded_fields(name, held, m
     sc = load_scenario(DATA / f'{name}.yaml')
     result = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.5))
     assert bool(calls) == held and result.feasible
+
+
+def test_a_seed_through_a_threat_never_wins(monkeypatch):
+    """strongweak_0's straight line crosses a threat (J inf) yet meets the slopes: with two
+    screening rounds it ranked first and was returned as the plan (PlanningError)."""
+    from threat_planner.core import best
+    from threat_planner.core.planner import plan, PlannerConfig
+    monkeypatch.setattr(best, 'SLOPE_SCREEN_ROUNDS', 2)
+    sc = load_scenario(DATA / 'strongweak_0.yaml')
+    result = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.5))
+    assert np.isfinite(result.cost.J) and result.feasible
+    from threat_planner.core.kernels import path_cost
+    line = np.vstack([sc.start, sc.goal])
+    assert path_cost(line, sc.threats.positions, sc.threats.intensities, 0.5).J == np.inf

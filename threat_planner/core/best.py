@@ -147,13 +147,12 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
             cand = refine(p, start, seq or routes[0], name, box_broken=broken)
         bound = bound or cand.limits_bound
         refined.append(cand)
-        if best is None or ((cand.limit_check.feasible, -cand.cost.J)
-                            > (best.limit_check.feasible, -best.cost.J)):
+        if best is None or ((_usable(cand), -cand.cost.J) > (_usable(best), -best.cost.J)):
             best = cand
         # Where the limits bind, the runner-up basin is refined too (measured: the
         # constrained optimum of the second basin wins on a third of the bundled cases).
-        feasible = sum(c.limit_check.feasible for c in refined)
-        if best.limit_check.feasible and (feasible >= BOUND_BASINS or not bound):
+        feasible = sum(_usable(c) for c in refined)
+        if _usable(best) and (feasible >= BOUND_BASINS or not bound):
             break
     # The warm-start rule's lead: the screening's where the limits did not bind; where
     # they did, the slope-held screening's, capped by the lead over the next distinct
@@ -168,6 +167,11 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
         best = repair(p, best)
     p.clock.lap('optimisation_ms')
     return best
+
+
+def _usable(c: Candidate) -> bool:
+    """Whether a candidate meets the limits with a finite J (not through a threat)."""
+    return bool(c.limit_check.feasible and np.isfinite(c.cost.J))
 
 
 def _lead(p: Problem, ranked: list[tuple[float, NDArray]]) -> float:
@@ -271,9 +275,10 @@ def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: flo
                             constrained_iterations=SLOPE_SCREEN_ITERATIONS,
                             constrained_rounds=SLOPE_SCREEN_ROUNDS,
                             tolerance=COARSE_TOLERANCE)
-        ok = check_limits(res.points, slopes, floor).feasible
-        held.append((not ok, p.cost(res.points).J, f'{name} (slopes held)', seq, res.points,
-                     res.constrained))
+        j = p.cost(res.points).J
+        # Through a threat (J inf: a line the minimiser cannot move off) ranks last too.
+        ok = check_limits(res.points, slopes, floor).feasible and np.isfinite(j)
+        held.append((not ok, j, f'{name} (slopes held)', seq, res.points, res.constrained))
     held.sort(key=lambda item: item[:2])
     feasible = [(item[1], item[4]) for item in held if not item[0]]
     lead = _lead(p, feasible) if feasible else 0.0
