@@ -145,3 +145,34 @@ def test_a_seed_through_a_threat_never_wins(monkeypatch):
     from threat_planner.core.kernels import path_cost
     line = np.vstack([sc.start, sc.goal])
     assert path_cost(line, sc.threats.positions, sc.threats.intensities, 0.5).J == np.inf
+
+
+def test_the_slope_screening_leaves_out_only_seeds_that_cannot_rank_in_the_first_two(
+        monkeypatch):
+    """Box-only optima whose J is past the second-best held J: the top two are unchanged."""
+    from threat_planner.core import best
+    from threat_planner.core.planner import plan, PlannerConfig
+    seen = {}
+    real = best._slope_screening
+
+    def spy(p, screened, bounds, cutoff, optimal):
+        calls = []
+        original = best.minimise_cost
+        monkeypatch.setattr(best, 'minimise_cost',
+                            lambda *a, **k: calls.append(1) or original(*a, **k))
+        pruned = real(p, screened, bounds, cutoff, optimal)
+        n_pruned = len(calls)
+        full = real(p, screened, bounds, cutoff, set())
+        monkeypatch.setattr(best, 'minimise_cost', original)
+        seen.update(pruned=pruned, full=full, runs=(n_pruned, len(calls) - n_pruned))
+        return pruned
+
+    monkeypatch.setattr(best, '_slope_screening', spy)
+    sc = load_scenario(DATA / 'uniform20_1.yaml')
+    plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.2))
+    pruned, full = seen['pruned'][0], seen['full'][0]
+    assert seen['runs'][0] < seen['runs'][1]
+    for a, b in zip(pruned[:2], full[:2]):
+        assert a[0] == b[0]
+        np.testing.assert_array_equal(a[2], b[2])
+    assert seen['pruned'][1] <= seen['full'][1]

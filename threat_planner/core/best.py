@@ -106,6 +106,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
         coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
                                cutoff=cutoff, tolerance=COARSE_TOLERANCE).points
         screened.append((p.cost(coarse).J, name, seq, coarse))
+    optimal = {name for _, name, _, _ in screened}
     # --- issue 11 global search (branch paperfaith): routes along the box's faces and
     # edges, where dense fields put the in-box optimum, join the screened seeds as they
     # are: 8 coarse segments would cut the box's corners back into the threats.
@@ -125,7 +126,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     # big300_0 the basin it put first refined 3.5 % (w 0.5) and 10.7 % (w 0.8) above the
     # box-only ranking's route 0 under the same limits.
     if (p.limits.climb_on or p.limits.dive_on) and not is_crowded(threats, p.box):
-        held, held_margin = _slope_screening(p, screened, bounds, cutoff)
+        held, held_margin = _slope_screening(p, screened, bounds, cutoff, optimal)
         # The slope-held ranking first: its winner is the basin as flown (first the
         # box-only winner: uniform20_1 refined two basins that never met the limits).
         order = _interleave(held, order)
@@ -248,8 +249,8 @@ def _refined_margin(p: Problem, best: Candidate, refined: list[Candidate],
     return max(min(held_margin, lead), 0.0) if np.isfinite(lead) else 0.0
 
 
-def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: float | None
-                     ) -> tuple[list[tuple[str, list[int], NDArray]], float]:
+def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: float | None,
+                     optimal: set[str]) -> tuple[list[tuple], float]:
     """Rank the screened seeds again, held to the climb and dive limits, best first.
 
     The slope limits mean the same at 8 segments as at n_points (the turn radius does
@@ -257,21 +258,33 @@ def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: flo
     limit-free basin that climbs a wall may lose to one that does not. Seeds the coarse
     run could not bring within the slopes rank last. Returns the ranking and the lead of
     its best basin over the next distinct one (:func:`_lead`).
+
+    Seeds named in ``optimal`` are box-only optima already, whose J holding the slopes
+    can only rise from: one whose J is already at least the second-best held J cannot
+    rank in the first two, and is left out (on the 21 bundled cases: 12 % fewer L-BFGS
+    runs in all, J within 0.001 %).
     """
     lim = p.limits
     slopes = FlightLimits(lim.max_climb_deg, lim.max_dive_deg, 0.0, lim.min_altitude_m)
     floor = float(p.box.lo[2])
-    held = []
-    # Every seed: re-screening only the best 4 lost 10 % J on uniform20_1 at w = 0.8.
+    # Every distinct seed: re-screening only the best 4 lost 10 % J on uniform20_1 at
+    # w = 0.8. A seed that screened into the basin of a better-ranked one would repeat
+    # its run; the others run surface routes (not minimised yet) first.
     kept: list[NDArray] = []
-    for _, name, seq, coarse in screened:
-        # A seed that screened into the basin of a better-ranked one would repeat its run.
+    todo = []
+    for j_box, name, seq, coarse in screened:
         key = resample(coarse, COARSE_SEGMENTS)
-        if any(_same_basin(p, key, k, resampled=True) for k in kept):
+        if not any(_same_basin(p, key, k, resampled=True) for k in kept):
+            kept.append(key)
+            todo.append((name in optimal, j_box, name, seq, key))
+    todo.sort(key=lambda item: item[0])
+    held, skipped = [], []
+    for bounded, j_box, name, seq, start in todo:
+        done = sorted(item[1] for item in held if not item[0])
+        if bounded and len(done) >= 2 and j_box >= done[1]:
+            skipped.append(j_box)
             continue
-        kept.append(key)
-        res = minimise_cost(resample(coarse, COARSE_SEGMENTS), p.threats, p.config.w,
-                            bounds, slopes, cutoff=cutoff,
+        res = minimise_cost(start, p.threats, p.config.w, bounds, slopes, cutoff=cutoff,
                             constrained_iterations=SLOPE_SCREEN_ITERATIONS,
                             constrained_rounds=SLOPE_SCREEN_ROUNDS,
                             tolerance=COARSE_TOLERANCE)
@@ -282,6 +295,9 @@ def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: flo
     held.sort(key=lambda item: item[:2])
     feasible = [(item[1], item[4]) for item in held if not item[0]]
     lead = _lead(p, feasible) if feasible else 0.0
+    if feasible and skipped and feasible[0][0] > 0:
+        # A left-out seed may be the next distinct basin: its J bounds the lead.
+        lead = min(lead, min(skipped) / feasible[0][0] - 1.0)
     return [item[2:] for item in held], lead
 
 
