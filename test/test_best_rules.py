@@ -176,3 +176,21 @@ def test_the_slope_screening_leaves_out_only_seeds_that_cannot_rank_in_the_first
         assert a[0] == b[0]
         np.testing.assert_array_equal(a[2], b[2])
     assert seen['pruned'][1] <= seen['full'][1]
+
+
+def test_a_shortcut_refine_that_ends_infeasible_is_redone_the_long_way(monkeypatch):
+    """box_broken skips the box-only run; if that leaves the limits broken, refine again."""
+    from threat_planner.core import best
+    calls = []
+
+    def fake(p, start, seq, name, box_broken=False, gate=None):
+        calls.append(box_broken)
+        return SimpleNamespace(final=start, cost=SimpleNamespace(J=100.0),
+                               limit_check=SimpleNamespace(feasible=not box_broken))
+
+    monkeypatch.setattr(best, 'refine', fake)
+    start = _path(0.0)
+    assert best._usable(best._refine(None, start, [], 'x', True)) and calls == [True, False]
+    calls.clear()
+    best._refine(None, start, [], 'x', False)
+    assert calls == [False]

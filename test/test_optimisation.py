@@ -93,7 +93,7 @@ def test_the_constrained_answer_is_the_least_j_feasible_round(problem, monkeypat
     """Every feasible round's J is recorded; the one returned is the least of them."""
     from threat_planner.core import optimisation as opt
     threats, box, start, goal = problem
-    limits = FlightLimits(8.0, 8.0, 20.0, 0.0)
+    limits = FlightLimits(8.0, 8.0, 40.0, 0.0)
     seen = []
     original = opt._Level.run
 
@@ -107,12 +107,13 @@ def test_the_constrained_answer_is_the_least_j_feasible_round(problem, monkeypat
     x0 = resample(np.vstack([start, [60.0, 40.0, 65.0], goal]), 20)
     level = opt._Level(x0, threats, 0.5, box, limits, None, 1e-6, opt._Stats())
     _, _, best = level.constrained(x0, None, opt.PENALTY_START, 200)
-    assert len(seen) >= 2
+    assert len(seen) >= 3
     j = path_cost(best, threats.positions, threats.intensities, 0.5).J
     assert j == pytest.approx(min(seen), rel=1e-12)
+    # With a gain any feasible round lowers J by less than (100 %), the second one stops.
     seen.clear()
-    _, _, first = level.constrained(x0, None, opt.PENALTY_START, 200, first_feasible=True)
-    assert len(seen) == 1 and check_limits(first, limits, 0.0).feasible
+    _, _, early = level.constrained(x0, None, opt.PENALTY_START, 200, gain=1.0)
+    assert len(seen) == 2 and check_limits(early, limits, 0.0).feasible
 
 
 def test_a_known_broken_box_optimum_goes_straight_to_the_rounds(problem, monkeypatch):
