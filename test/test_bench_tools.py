@@ -180,3 +180,23 @@ def test_targets_are_against_the_in_box_and_limited_yardsticks():
     assert f'| {br.OFF} | yes | none | 2 |' in summary
     assert '| lower bound `reference.json` (leaves the box) | no | none | 2 | 0.9500' in summary
     assert 'NO (max_climb_deg 31 vs 30)' in br.cases_table(cases)
+
+
+def test_random_fields_are_reproducible_and_the_summary_lists_the_movers():
+    """The same 45 fields every run; a J moved past 0.2 % or an infeasible plan is listed."""
+    rf = importlib.import_module('run_random_fields')
+    first = [(name, th.positions.copy(), s, t) for name, th, s, t, _, _ in rf.fields()]
+    again = list(rf.fields())
+    assert len(first) == len(rf.SIZES) * len(rf.SEEDS) * len(rf.WS) == 45
+    for (name, pos, s, t), (name2, th, s2, t2, box, _) in zip(first, again):
+        assert name == name2
+        np.testing.assert_array_equal(pos, th.positions)
+        np.testing.assert_array_equal(s, s2)
+        assert box.contains(s) and box.contains(t)
+    before = {'a on': [100.0, 10.0, True], 'b on': [100.0, 10.0, True],
+              'c on': [100.0, 10.0, True], 'a off': [90.0, 5.0, True]}
+    after = {'a on': [100.1, 8.0, True], 'b on': [99.0, 8.0, True],
+             'c on': [100.0, 8.0, False], 'a off': [90.0, 4.0, True]}
+    line, rows = rf._summary(before, after, 'on')
+    assert '3 plans' in line and 'worst 1.0010' in line and 'infeasible after: 1' in line
+    assert [r.split(' |')[0] for r in rows] == ['| b on', '| c on']
