@@ -117,10 +117,15 @@ class Box:
         pad = max(margin * float(np.linalg.norm(hi - lo)), 1.0)
         return cls(lo - pad, hi + pad)
 
-    @property
+    @cached_property
     def diagonal(self) -> float:
         """Length of the box's diagonal [m]."""
         return float(np.linalg.norm(self.hi - self.lo))
+
+    @cached_property
+    def volume(self) -> float:
+        """Volume of the box [m^3]."""
+        return float(np.prod(self.hi - self.lo))
 
     def contains(self, point: NDArray, tol: float = 1e-9) -> bool:
         """Return whether the point lies in the box (boundary included)."""
@@ -202,8 +207,7 @@ class ThreatField:
 
     def typical_spacing(self, box: Box) -> float:
         """Mean spacing of the threats if spread evenly through the box [m]."""
-        volume = float(np.prod(box.hi - box.lo))
-        return (volume / max(len(self), 1)) ** (1.0 / 3.0)
+        return (box.volume / max(len(self), 1)) ** (1.0 / 3.0)
 
     def near_pairs(self, a: NDArray, b: NDArray, radius: float
                    ) -> tuple[NDArray, NDArray, NDArray]:
