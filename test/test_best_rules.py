@@ -119,18 +119,20 @@ def test_the_preconditioner_runs_only_on_uncrowded_fields_with_every_threat(
     assert seen and set(seen) == {smooth}
 
 
-@pytest.mark.parametrize('name, held', [('big300_0', False), ('uniform20_0', True)])
-def test_the_slope_held_screening_runs_only_outside_crowded_fields(name, held, monkeypatch):
-    """8 segments misrank a crowded field's basins: there the box-only ranking is used."""
+@pytest.mark.parametrize('name, held_first', [('big300_0', False), ('uniform20_0', True)])
+def test_a_crowded_field_refines_the_box_only_ranking_first(name, held_first, monkeypatch):
+    """8 segments misrank a crowded field's basins: there the box-only ranking leads."""
     from threat_planner.core import best
     from threat_planner.core.planner import plan, PlannerConfig
-    calls = []
-    real = best._slope_screening
-    monkeypatch.setattr(best, '_slope_screening',
-                        lambda *a: calls.append(1) or real(*a))
+    names = []
+    real = best.refine
+    monkeypatch.setattr(best, 'refine',
+                        lambda p, start, seq, name, **k: names.append(name)
+                        or real(p, start, seq, name, **k))
     sc = load_scenario(DATA / f'{name}.yaml')
     result = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.5))
-    assert bool(calls) == held and result.feasible
+    assert result.feasible and names
+    assert names[0].endswith('(slopes held)') == held_first
 
 
 def test_a_seed_through_a_threat_never_wins(monkeypatch):

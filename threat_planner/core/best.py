@@ -121,19 +121,24 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     margin = _lead(p, [(j, path) for j, _, _, path in screened])
     order = [(name, seq, coarse, False) for _, name, seq, coarse in screened]
     held_margin = 0.0
-    # Not in a crowded field: 8 segments through threats whose reach exceeds their
-    # spacing rank the basins as badly as the coarse levels would (optimisation.py): on
-    # big300_0 the basin it put first refined 3.5 % (w 0.5) and 10.7 % (w 0.8) above the
-    # box-only ranking's route 0 under the same limits.
-    if (p.limits.climb_on or p.limits.dive_on) and not is_crowded(threats, p.box):
+    # In a crowded field 8 segments through threats whose reach exceeds their spacing
+    # rank the basins as unreliably as the coarse levels would (optimisation.py): one
+    # more basin is refined there. Measured on big300_0 at w 0.2 / 0.5 / 0.8 with the turn
+    # radius 10 m and 100 m: the slope-held ranking first missed the box-only ranking's
+    # route 0 (1.5, 3.5 and 10.7 % lower at 10 m), the box-only ranking alone missed a
+    # slope-held basin (4.6 % lower at w 0.2, 100 m); three basins, box-only first, found
+    # both.
+    crowded = is_crowded(threats, p.box)
+    basins, tries = BOUND_BASINS + crowded, FEASIBILITY_TRIES + crowded
+    if p.limits.climb_on or p.limits.dive_on:
         held, held_margin = _slope_screening(p, screened, bounds, cutoff, optimal)
-        # The slope-held ranking first: its winner is the basin as flown (first the
-        # box-only winner: uniform20_1 refined two basins that never met the limits).
-        order = _interleave(held, order)
+        # Elsewhere the slope-held ranking first: its winner is the basin as flown (first
+        # the box-only winner: uniform20_1 refined two basins that never met the limits).
+        order = _interleave(order, held) if crowded else _interleave(held, order)
     p.clock.lap('screening_ms')
     best: Candidate | None = None
     bound, refined, runner_lead = False, [], None
-    for name, seq, coarse, broken in order[:FEASIBILITY_TRIES]:
+    for name, seq, coarse, broken in order[:tries]:
         start = resample(coarse, cfg.n_points)
         if best is not None and bound and best.limit_check.feasible and best.levels:
             # The runner-up basin level by level, the finer levels only while it may win
@@ -153,7 +158,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
         # Where the limits bind, the runner-up basin is refined too (measured: the
         # constrained optimum of the second basin wins on a third of the bundled cases).
         feasible = sum(_usable(c) for c in refined)
-        if _usable(best) and (feasible >= BOUND_BASINS or not bound):
+        if _usable(best) and (feasible >= basins or not bound):
             break
     # The warm-start rule's lead: the screening's where the limits did not bind; where
     # they did, the slope-held screening's, capped by the lead over the next distinct
