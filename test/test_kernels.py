@@ -169,7 +169,8 @@ def test_multipliers_carry_to_a_finer_path_as_densities():
     assert out[:20].sum() == pytest.approx(lam[:10].sum())
 
 
-def test_lbfgs_moves_no_vertex_further_than_max_step_per_iteration():
+def _ends_fixed():
+    """The problem without limits, flat: start, bounds fixing only the ends, empty term."""
     x, pos, f, _ = _problem(with_limits=False)
     n1 = len(x)
     lo = np.full(3 * n1, -np.inf)
@@ -177,7 +178,11 @@ def test_lbfgs_moves_no_vertex_further_than_max_step_per_iteration():
     lo[:3] = hi[:3] = x[0]
     lo[-3:] = hi[-3:] = x[-1]
     off = np.zeros(7), np.zeros(0), np.zeros((n1, 3))
-    start = x.reshape(-1).copy()
+    return x.reshape(-1).copy(), lo, hi, pos, f, off, n1
+
+
+def test_lbfgs_moves_no_vertex_further_than_max_step_per_iteration():
+    start, lo, hi, pos, f, off, n1 = _ends_fixed()
     moved = []
     for iterations in (1, 2, 3):
         z, _, nit, _ = minimise(start, lo, hi, pos, f, 0.5, (_NO_PAIRS, _NO_PAIRS),
@@ -215,14 +220,7 @@ def test_preconditioner_solves_the_second_difference_system_of_the_free_vertices
 
 def test_lbfgs_stops_at_the_first_iterate_beyond_reach():
     """Every iterate before the last is within reach; the last is the first one out."""
-    x, pos, f, _ = _problem(with_limits=False)
-    n1 = len(x)
-    lo = np.full(3 * n1, -np.inf)
-    hi = np.full(3 * n1, np.inf)
-    lo[:3] = hi[:3] = x[0]
-    lo[-3:] = hi[-3:] = x[-1]
-    off = np.zeros(7), np.zeros(0), np.zeros((n1, 3))
-    start = x.reshape(-1).copy()
+    start, lo, hi, pos, f, off, n1 = _ends_fixed()
 
     def run(iterations, reach=np.inf):
         return minimise(start, lo, hi, pos, f, 0.5, (_NO_PAIRS, _NO_PAIRS), _FROZEN_C2,

@@ -140,7 +140,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     bound, refined, runner_lead = False, [], None
     for name, seq, coarse, broken in order[:tries]:
         start = resample(coarse, cfg.n_points)
-        if best is not None and bound and best.limit_check.feasible and best.levels:
+        if best is not None and bound and _usable(best) and best.levels:
             # The runner-up basin level by level, the finer levels only while it may win
             # (measured: most runners-up were in the winner's basin from the coarsest).
             verdict: list[float] = []
@@ -245,7 +245,7 @@ def _runner_up_lead(p: Problem, mine: NDArray, theirs: NDArray, feasible: bool
 def _same_basin(p: Problem, a: NDArray, b: NDArray, resampled: bool = False) -> bool:
     """Whether two paths lie within 1 % of the box diagonal (compared at 8 segments).
 
-    ``resampled``: both are :func:`resample` d to COARSE_SEGMENTS already.
+    ``resampled``: both are already resampled to COARSE_SEGMENTS.
     """
     gap = a - b if resampled else resample(a, COARSE_SEGMENTS) - resample(b, COARSE_SEGMENTS)
     return float(np.max(np.einsum('ij,ij->i', gap, gap))) <= (0.01 * p.box.diagonal) ** 2
