@@ -426,7 +426,8 @@ def path_cost(points: NDArray, positions: NDArray, intensities: NDArray, w: floa
     points = np.ascontiguousarray(points, float)
     # J_L as cost.path_cost sums it, to the last bit.
     j_l = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
-    if (len(points) - 1) * len(positions) >= PARALLEL_PAIRS:
+    # Through segment_costs only where it runs in parallel; serially, one pass here.
+    if (len(points) - 1) * len(positions) >= SEGMENT_PARALLEL_PAIRS:
         j_r = float(segment_costs(points[:-1], points[1:], positions, intensities).sum())
     elif len(positions) == 0 or len(points) < 2:
         j_r = 0.0
