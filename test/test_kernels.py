@@ -110,7 +110,7 @@ def test_objective_gradient_matches_finite_differences():
         g = np.zeros(3 * n1)
         v = _objective(z, n1, pos, f, 0.6, _NO_PAIRS, _NO_PAIRS, _FROZEN_C2, _FROZEN_C3,
                        0.01, 0.5, 80.0, term.kernel_args(), lam, 30.0,
-                       np.zeros(term.rows), np.zeros((n1, 3)), g)
+                       np.zeros(term.rows), np.zeros((n1, 3)), g, np.zeros(2))
         return v, g
 
     z = x.reshape(-1).copy()
@@ -136,7 +136,7 @@ def test_lbfgs_reaches_scipy_lbfgsb_within_bounds(precondition):
     def fun(z):
         g = np.zeros(3 * n1)
         v = _objective(z, n1, pos, f, 0.5, _NO_PAIRS, _NO_PAIRS, _FROZEN_C2, _FROZEN_C3,
-                       0.0, 0.0, 1.0, off[0], off[1], 1.0, off[1], off[2], g)
+                       0.0, 0.0, 1.0, off[0], off[1], 1.0, off[1], off[2], g, np.zeros(2))
         return v, g
 
     start = np.clip(x, lo, hi).reshape(-1)
@@ -236,3 +236,42 @@ def test_lbfgs_stops_at_the_first_iterate_beyond_reach():
     out = lambda y: np.linalg.norm((y - start).reshape(n1, 3), axis=1).max()  # noqa: E731
     assert 1.0 < out(z) <= 1.5 + 1e-12
     assert out(run(nit - 1)[0]) <= 1.0
+
+
+def test_lbfgs_reports_the_minimiser_s_parts_and_scales_itself_exactly():
+    """parts = J + spring and J + both spacing terms at the minimiser, as a fresh call
+    gives them; scale 0 runs bit for bit as the start's value given."""
+    x, pos, f, term = _problem()
+    n1 = len(x)
+    lo = np.tile([0.0, 0.0, 0.0], (n1, 1)).reshape(-1)
+    hi = np.tile([100.0, 100.0, 100.0], (n1, 1)).reshape(-1)
+    lo[:3] = hi[:3] = x[0]
+    lo[-3:] = hi[-3:] = x[-1]
+    lam = np.full(term.rows, 0.1)
+    for lim, mu in ((np.zeros(7), 1.0), (term.kernel_args(), 10.0)):
+        lam_k = lam if lim[6] else np.zeros(0)
+
+        def value(z, even, scale):
+            parts = np.zeros(2)
+            v = _objective(z, n1, pos, f, 0.5, _NO_PAIRS, _NO_PAIRS, _FROZEN_C2, _FROZEN_C3,
+                           0.01, even, scale, np.zeros(7), np.zeros(0), 1.0, np.zeros(0),
+                           np.zeros((n1, 3)), np.zeros(3 * n1), parts)
+            return v, parts
+
+        start = x.reshape(-1).copy()
+        scale = value(start, 0.3, 1.0)[0]
+
+        def run(s, parts):
+            return minimise(start, lo, hi, pos, f, 0.5, (_NO_PAIRS, _NO_PAIRS), _FROZEN_C2,
+                            _FROZEN_C3, 0.01, 0.3, s, lim, lam_k, mu,
+                            np.zeros(len(lam_k)), np.zeros((n1, 3)), 300, 1e-9,
+                            parts=parts)
+
+        given, itself = np.zeros(2), np.zeros(2)
+        a, b = run(scale, given), run(0.0, itself)
+        np.testing.assert_array_equal(a[0], b[0])
+        assert a[1:] == b[1:] and np.array_equal(given, itself)
+        assert a[2] > 5
+        j_spring = value(a[0], 0.0, 1.0)[0]
+        assert given[0] == j_spring
+        assert given[1] / scale == value(a[0], 0.3, scale)[0]

@@ -133,3 +133,24 @@ def test_a_known_broken_box_optimum_goes_straight_to_the_rounds(problem, monkeyp
     assert path_cost(res.points, threats.positions, threats.intensities, 0.5).J < j0
     minimise_cost(x0, threats, 0.5, box, limits)
     assert calls                                   # without it the box-only run comes first
+
+
+def test_the_hot_loop_s_feasibility_is_check_limits_verdict():
+    """meets_limits says what check_limits(...).feasible says, near every limit."""
+    from threat_planner.core.limits import meets_limits
+    rng = np.random.default_rng(3)
+    limits = FlightLimits(20.0, 25.0, 15.0, 5.0)
+    verdicts = set()
+    for _ in range(300):
+        # Arcs around every limit: radius 10-20 m, climbing or diving 15-30 deg, from
+        # 3-8 m up.
+        radius, slope = rng.uniform(10.0, 20.0), np.radians(rng.uniform(15.0, 30.0))
+        arc = np.linspace(0.0, 1.5, 12)
+        sign = rng.choice([-1.0, 1.0])
+        pts = np.column_stack([radius * np.cos(arc), radius * np.sin(arc),
+                               rng.uniform(3.0, 8.0) + sign * radius * arc * np.tan(slope)])
+        pts[:, 2] -= min(0.0, pts[1:-1, 2].min() - rng.uniform(3.0, 8.0))
+        full = check_limits(pts, limits, 0.0)
+        assert meets_limits(pts, limits, 0.0) == full.feasible
+        verdicts.update(full.violations or {'none'})
+    assert verdicts == {'none', 'climb_deg', 'dive_deg', 'turn_radius_m', 'altitude_m'}

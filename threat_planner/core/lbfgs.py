@@ -41,8 +41,12 @@ _MAX_BACKTRACKS = 40
 
 @njit(cache=True)
 def _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale, lim, lam, mu,
-               gbuf, pgrad, grad):
-    """Scaled J + spacing terms (+ the limits' PHR term if lim[6]); gradient into grad."""
+               gbuf, pgrad, grad, parts):
+    """Scaled J + spacing terms (+ the limits' PHR term if lim[6]); gradient into grad.
+
+    ``parts`` (2,) receives the unscaled J + spring term and J + both spacing terms (what
+    the caller compares between runs, without evaluating the path again).
+    """
     p = x.reshape((n1, 3))
     g = grad.reshape((n1, 3))
     pairs = seg.shape[0] if seg.shape[0] else (n1 - 1) * positions.shape[0]
@@ -52,6 +56,7 @@ def _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale, li
         j = _kernel(p, positions, f, w, seg, thr, c2, c3, g)
     if not math.isfinite(j):
         grad[:] = 0.0
+        parts[0] = parts[1] = 1e300
         return 1e300
     n = n1 - 1
     sum_l = 0.0
@@ -70,6 +75,7 @@ def _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale, li
         g[s + 1, 0] += 2.0 * spring * dx
         g[s + 1, 1] += 2.0 * spring * dy
         g[s + 1, 2] += 2.0 * spring * dz
+    spring_j = j
     if even > 0.0 and n > 0:
         # n Var(segment length) = sum l^2 - (sum l)^2 / n: even spacing without the pull
         # towards a shorter path a plain spring has.
@@ -87,6 +93,8 @@ def _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale, li
             g[s + 1, 0] += c * dx
             g[s + 1, 1] += c * dy
             g[s + 1, 2] += c * dz
+    parts[0] = spring_j
+    parts[1] = j
     val = j / scale
     for k in range(grad.shape[0]):
         grad[k] /= scale
@@ -127,18 +135,34 @@ def _tri_solve(v, free, n1, out, cp, dp):
 
 @njit(cache=True)
 def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale, lim,
-              lam, mu, gbuf, pgrad, maxiter, ftol, gtol, m, max_step, pre, reach, out):
+              lam, mu, gbuf, pgrad, maxiter, ftol, gtol, m, max_step, pre, reach, out,
+              parts):
     """Projected L-BFGS from x0 within [lo, hi] (preconditioned if pre); minimiser into out.
 
-    Returns (value, iterations, evaluations, why it stopped: 0 small decrease, 1 small
-    gradient, 2 no step accepted, 3 iteration limit, 4 a vertex moved beyond reach).
+    ``scale`` <= 0: the value of J + spacing terms at the start (finite, positive), as
+    the caller's ``_scale`` would take it. ``parts`` receives :func:`_objective`'s parts at
+    the minimiser. Returns (value, iterations, evaluations, why it stopped: 0 small
+    decrease, 1 small gradient, 2 no step accepted, 3 iteration limit, 4 a vertex moved
+    beyond reach).
     """
     nv = x0.shape[0]
     n1 = nv // 3
     x = np.minimum(np.maximum(x0, lo), hi)
     g = np.zeros(nv)
-    fx = _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale, lim,
-                    lam, mu, gbuf, pgrad, g)
+    trial = np.zeros(2)
+    fx = _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even,
+                    1.0 if scale <= 0.0 else scale, lim, lam, mu, gbuf, pgrad, g, parts)
+    if scale <= 0.0:
+        # (j / 1) / s is j / s exactly: the same start as a call given s.
+        v = parts[1]
+        scale = max(abs(v), 1e-12) if math.isfinite(v) and v < 1e299 else 1.0
+        if lim[6] > 0.0:
+            fx = _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale,
+                            lim, lam, mu, gbuf, pgrad, g, parts)
+        else:
+            fx /= scale
+            for k in range(nv):
+                g[k] /= scale
     nfev = 1
     s_mem = np.zeros((m, nv))
     y_mem = np.zeros((m, nv))
@@ -248,7 +272,7 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
                 v = x[k] + step * d[k]
                 xn[k] = lo[k] if v < lo[k] else hi[k] if v > hi[k] else v
             fn = _objective(xn, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale,
-                            lim, lam, mu, gbuf, pgrad, gn)
+                            lim, lam, mu, gbuf, pgrad, gn, trial)
             nfev += 1
             slope = 0.0
             for k in range(nv):
@@ -282,6 +306,7 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
             head = (head + 1) % m
             count = min(count + 1, m)
         decrease = (fx - fn) / max(abs(fx), abs(fn), 1.0)
+        parts[:] = trial
         x[:] = xn
         g[:] = gn
         fx = fn
@@ -308,12 +333,12 @@ def objective(x, n1, positions, f, w, pairs, c2, c3, spring, even, scale, lim, l
     """Run :func:`_objective` (its arguments; ``pairs`` as in :func:`minimise`)."""
     with parallel_guard(len(pairs[0]) or (n1 - 1) * len(positions)):
         return float(_objective(x, n1, positions, f, w, pairs[0], pairs[1], c2, c3, spring,
-                                even, scale, lim, lam, mu, gbuf, pgrad, grad))
+                                even, scale, lim, lam, mu, gbuf, pgrad, grad, np.zeros(2)))
 
 
 def minimise(x0, lo, hi, positions, f, w, pairs, c2, c3, spring, even, scale, lim, lam, mu,
              gbuf, pgrad, maxiter, ftol, gtol=1e-7, memory=20, max_step=math.inf,
-             precondition=True, reach=math.inf):
+             precondition=True, reach=math.inf, parts=None):
     """Run :func:`_minimise`; returns ``(x, value, iterations, evaluations)``.
 
     Parameters are those of the objective: ``x0``, ``lo``, ``hi`` flat (3 (n+1),) [m];
@@ -323,14 +348,16 @@ def minimise(x0, lo, hi, positions, f, w, pairs, c2, c3, spring, even, scale, li
     its scratch space; ``max_step`` the longest move of a vertex per iteration [m];
     ``precondition`` False for the plain identity-scaled start of the recursion; ``reach``
     how far a vertex may get from x0 before the run stops [m] (a cut-off's pairs hold
-    only near where they were picked).
+    only near where they were picked); ``scale`` <= 0 to scale by the start's value;
+    ``parts`` (2,), if given, receives J + spring and J + both spacing terms at x, unscaled.
     """
     out = np.empty_like(x0)
+    parts = np.zeros(2) if parts is None else parts
     with parallel_guard(len(pairs[0]) or (len(x0) // 3 - 1) * len(positions)):
         val, nit, nfev, _ = _minimise(x0, lo, hi, positions, f, float(w), pairs[0],
                                       pairs[1], c2, c3, float(spring), float(even),
                                       float(scale), lim, lam, float(mu), gbuf, pgrad,
                                       int(maxiter), float(ftol), float(gtol), int(memory),
                                       float(max_step), bool(precondition), float(reach),
-                                      out)
+                                      out, parts)
     return out, float(val), int(nit), int(nfev)

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from threat_planner.core.limit_kernels import DEGENERATE, measure
 
-__all__ = ['FlightLimits', 'LimitCheck', 'check_limits', 'climb_angles',
+__all__ = ['FlightLimits', 'LimitCheck', 'check_limits', 'climb_angles', 'meets_limits',
            'constraint_jacobian', 'constraint_values', 'constraint_vjp', 'turn_radii']
 
 #: Slack of the final check, so a path optimised onto a limit is not failed by rounding.
@@ -192,23 +192,34 @@ def check_limits(points: NDArray, limits: FlightLimits, floor_z: float) -> Limit
 
     """
     climb, dive, radius, alt = measure(points, floor_z)
-    excess = {}
-    rel = {}
-    if climb > limits.max_climb_deg + CHECK_SLACK:
-        excess['climb_deg'] = climb - limits.max_climb_deg
-        rel['climb_deg'] = excess['climb_deg'] / max(limits.max_climb_deg, 1.0)
-    if dive > limits.max_dive_deg + CHECK_SLACK:
-        excess['dive_deg'] = dive - limits.max_dive_deg
-        rel['dive_deg'] = excess['dive_deg'] / max(limits.max_dive_deg, 1.0)
-    if radius < limits.min_turn_radius_m * (1.0 - CHECK_SLACK):
-        excess['turn_radius_m'] = limits.min_turn_radius_m - radius
-        rel['turn_radius_m'] = excess['turn_radius_m'] / limits.min_turn_radius_m
-    if alt < limits.min_altitude_m - CHECK_SLACK * max(limits.min_altitude_m, 1.0):
-        excess['altitude_m'] = limits.min_altitude_m - alt
-        rel['altitude_m'] = excess['altitude_m'] / max(limits.min_altitude_m, 1.0)
+    excess = _excess(climb, dive, radius, alt, limits)
+    unit = {'climb_deg': max(limits.max_climb_deg, 1.0),
+            'dive_deg': max(limits.max_dive_deg, 1.0),
+            'turn_radius_m': limits.min_turn_radius_m,
+            'altitude_m': max(limits.min_altitude_m, 1.0)}
+    rel = {k: v / unit[k] for k, v in excess.items()}
     worst = max(rel, key=rel.get) if rel else None
-    return LimitCheck(climb, dive, radius, alt, {k: float(v) for k, v in excess.items()},
-                      worst)
+    return LimitCheck(climb, dive, radius, alt, excess, worst)
+
+
+def meets_limits(points: NDArray, limits: FlightLimits, floor_z: float) -> bool:
+    """Whether a path meets the limits: ``check_limits(...).feasible``, for a hot loop."""
+    return not _excess(*measure(points, floor_z), limits)
+
+
+def _excess(climb: float, dive: float, radius: float, alt: float,
+            limits: FlightLimits) -> dict[str, float]:
+    """Breach of each limit a path's measures break (within CHECK_SLACK), by name."""
+    excess = {}
+    if climb > limits.max_climb_deg + CHECK_SLACK:
+        excess['climb_deg'] = float(climb - limits.max_climb_deg)
+    if dive > limits.max_dive_deg + CHECK_SLACK:
+        excess['dive_deg'] = float(dive - limits.max_dive_deg)
+    if radius < limits.min_turn_radius_m * (1.0 - CHECK_SLACK):
+        excess['turn_radius_m'] = float(limits.min_turn_radius_m - radius)
+    if alt < limits.min_altitude_m - CHECK_SLACK * max(limits.min_altitude_m, 1.0):
+        excess['altitude_m'] = float(limits.min_altitude_m - alt)
+    return excess
 
 
 def _blocks(points: NDArray, limits: FlightLimits

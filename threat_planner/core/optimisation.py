@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS
 from threat_planner.core.lbfgs import minimise, objective
 from threat_planner.core.limit_kernels import LimitTerm
-from threat_planner.core.limits import check_limits, FlightLimits
+from threat_planner.core.limits import FlightLimits, meets_limits
 from threat_planner.core.smoothing import resample
 from threat_planner.core.threats import Box, ThreatField
 
@@ -159,7 +159,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     level = _Level(x, threats, w, box, limits, cutoff, tolerance, stats, smooth)
     x = level.clip(x)
     skip = (constrained_only and limits.any_constraint
-            and check_limits(x, limits, level.floor).feasible)
+            and meets_limits(x, limits, level.floor))
     # Coarse levels only where the threats' reaches (F^(1/4): where a threat costs as
     # much per metre as a metre of length) leave room between them: in a crowded field
     # (big300_0: reach 220 m, spacing 150 m) the coarse rounds ended in basins 3 to 300
@@ -179,9 +179,9 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         x = probe.unconstrained(probe.clip(resample(x, probe.n - 1)) if coarse else x,
                                 max_iterations)
         if coarse and (not limits.any_constraint
-                       or check_limits(x, limits, probe.floor).feasible):
+                       or meets_limits(x, limits, probe.floor)):
             x = level.unconstrained(level.clip(resample(x, n - 1)), max_iterations)
-        if not limits.any_constraint or check_limits(x, limits, level.floor).feasible:
+        if not limits.any_constraint or meets_limits(x, limits, level.floor):
             return stats.result(x, False)
         # The rounds start from whichever breaks the limits less: the box-only optimum
         # or the given start (a seed screened under the slope limits). From a box-only
@@ -255,6 +255,7 @@ class _Level:
         self.intensities = _frozen(threats.intensities)
         self.pairs = (_NO_PAIRS, _NO_PAIRS, self.positions)
         self._off = (np.zeros(7), np.zeros(0), np.zeros((n, 3)))
+        self.parts = np.zeros(2)
 
     def clip(self, x: NDArray) -> NDArray:
         """Move the path's interior vertices into the bounds."""
@@ -283,7 +284,10 @@ class _Level:
     def run(self, p: NDArray, even: float, scale: float, maxiter: int,
             term: LimitTerm | None = None, lam: NDArray | None = None,
             mu: float = 1.0, reach: float = np.inf) -> NDArray:
-        """One L-BFGS run from p; the minimiser, (n, 3)."""
+        """One L-BFGS run from p (scale <= 0: by its value); the minimiser, (n, 3).
+
+        ``self.parts``: then the minimiser's ``value(x, 0.0)`` and ``value(x, even, 1)``.
+        """
         if term is None:
             lim, lam, gbuf, pgrad = self._off[0], self._off[1], self._off[1], self._off[2]
         else:
@@ -293,7 +297,7 @@ class _Level:
             self.hi.reshape(-1), self.pairs[2], self.intensities, self.w, self.pairs[:2],
             _FROZEN_C2, _FROZEN_C3, self.spring, even, scale, lim, lam, mu, gbuf, pgrad,
             maxiter, self.tolerance, max_step=self.max_step, precondition=self.precondition,
-            reach=reach)
+            reach=reach, parts=self.parts)
         self.stats.add(nit, nfev)
         return z.reshape(self.n, 3)
 
@@ -309,7 +313,7 @@ class _Level:
         for _ in range(MAX_PAIR_ROUNDS if self.cutoff is not None else 1):
             self.pick_pairs(x)
             # Dimensionless objective: the tolerances then mean the same everywhere.
-            moved = self.run(x, 0.0, _scale(self.value(x, 0.0)), maxiter, reach=reach)
+            moved = self.run(x, 0.0, 0.0, maxiter, reach=reach)
             shift = float(np.max(np.linalg.norm(moved - x, axis=1)))
             x = moved
             if self.cutoff is None or shift < REPICK_CUTOFFS * self.cutoff:
@@ -348,10 +352,10 @@ class _Level:
             c = term.values(x)
             violation = float(np.max(-c, initial=0.0))
             lam = np.maximum(0.0, lam - mu * c)
-            f = self.value(x, even, scale)
-            feasible = check_limits(x, self.limits, self.floor).feasible
+            # = value(x, 0.0) and value(x, even, scale), exactly.
+            j, f = float(self.parts[0]), float(self.parts[1]) / scale
+            feasible = meets_limits(x, self.limits, self.floor)
             if feasible:
-                j = self.value(x, 0.0)
                 # A feasible round that gained little over the last one ends the level.
                 stop = gain is not None and best is not None and best[0] - j < gain * abs(j)
                 if best is None or j < best[0]:
