@@ -89,31 +89,87 @@ def test_prolongation_keeps_a_coarse_arc_s_turn_radius_where_linear_halves_it():
     np.testing.assert_allclose(_prolong(coarse, 15), resample(coarse, 15))
 
 
-def test_the_constrained_answer_is_the_least_j_feasible_round(problem, monkeypatch):
-    """Every feasible round's J is recorded; the one returned is the least of them."""
+def test_the_constrained_answer_is_the_least_j_feasible_round(problem):
+    """Every round's J is traced; the one returned is the least feasible of them."""
     from threat_planner.core import optimisation as opt
     threats, box, start, goal = problem
     limits = FlightLimits(8.0, 8.0, 40.0, 0.0)
-    seen = []
-    original = opt._Level.run
-
-    def spy(self, p, even, scale, maxiter, term=None, lam=None, mu=1.0):
-        z = original(self, p, even, scale, maxiter, term, lam, mu)
-        if check_limits(z, limits, 0.0).feasible:
-            seen.append(path_cost(z, threats.positions, threats.intensities, 0.5).J)
-        return z
-
-    monkeypatch.setattr(opt._Level, 'run', spy)
     x0 = resample(np.vstack([start, [60.0, 40.0, 65.0], goal]), 20)
     level = opt._Level(x0, threats, 0.5, box, limits, None, 1e-6, opt._Stats())
     _, _, best = level.constrained(x0, None, opt.PENALTY_START, 200)
-    assert len(seen) >= 3
-    j = path_cost(best, threats.positions, threats.intensities, 0.5).J
-    assert j == pytest.approx(min(seen), rel=1e-12)
+    done = level.trace[~np.isnan(level.trace[:, 0])]
+    feasible = done[done[:, 1] == 1.0, 0]
+    assert len(feasible) >= 3
+    assert check_limits(best, limits, 0.0).feasible
+    assert level.value(best, 0.0) == feasible.min()
     # With a gain any feasible round lowers J by less than (100 %), the second one stops.
-    seen.clear()
     _, _, early = level.constrained(x0, None, opt.PENALTY_START, 200, gain=1.0)
-    assert len(seen) == 2 and check_limits(early, limits, 0.0).feasible
+    done = level.trace[~np.isnan(level.trace[:, 0])]
+    assert done[-1, 1] == 1.0 and np.sum(done[:, 1]) == 2.0
+    assert check_limits(early, limits, 0.0).feasible
+
+
+def _reference_rounds(level, x, lam, mu, maxiter, rounds, gain):
+    """The rounds as they ran in Python before they were compiled (for the cross-check)."""
+    from threat_planner.core import optimisation as opt
+    from threat_planner.core.limit_kernels import LimitTerm
+    x = level.clip(x)
+    level.pick_pairs(x)
+    even = opt.EVEN_SPACING_WEIGHT * level.spring_unit
+    scale = opt._scale(level.value(x, even))
+    term = LimitTerm(level.limits.tightened(opt.ANGLE_MARGIN_DEG, opt.RADIUS_MARGIN), level.n)
+    lam = np.zeros(term.rows) if lam is None else term.transfer(lam)
+    prev_violation, prev_f, best, picked = np.inf, np.inf, None, x
+    for _ in range(rounds):
+        if level.cutoff is not None and float(np.max(np.linalg.norm(
+                x - picked, axis=1))) >= opt.REPICK_CUTOFFS * level.cutoff:
+            level.pick_pairs(x)
+            picked = x
+        x = level.run(x, even, scale, maxiter, term, lam, mu)
+        c = term.values(x)
+        violation = float(np.max(-c, initial=0.0))
+        lam = np.maximum(0.0, lam - mu * c)
+        f = level.value(x, even, scale)
+        if check_limits(x, level.limits, level.floor).feasible:
+            j = level.value(x, 0.0)
+            stop = gain is not None and best is not None and best[0] - j < gain * abs(j)
+            if best is None or j < best[0]:
+                best = (j, x)
+            if stop or abs(prev_f - f) <= opt.OUTER_TOLERANCE * max(abs(f), 1.0):
+                break
+        if violation > 0.25 * prev_violation:
+            mu *= opt.PENALTY_GROWTH
+        prev_violation, prev_f = violation, f
+    return x, lam, None if best is None else best[1]
+
+
+@pytest.mark.parametrize('cutoff', [None, 12.0])
+@pytest.mark.parametrize('gain', [None, 1e-3])
+def test_compiled_rounds_run_as_the_python_loop_bit_for_bit(cutoff, gain):
+    """Same iterates, multipliers and answer as the loop in Python, with and without a
+    cut-off whose pairs are picked again on the way."""
+    from threat_planner.core import optimisation as opt
+    rng = np.random.default_rng(11)
+    threats = ThreatField.from_arrays(rng.uniform(10, 90, (25, 3)), rng.uniform(2e4, 2e5, 25))
+    box = Box.from_corners([0, 0, 0], [100, 100, 100])
+    limits = FlightLimits(12.0, 12.0, 30.0, 0.0)
+    x0 = resample(np.vstack([[0.0, 0.0, 50.0], [55.0, 30.0, 75.0], [100.0, 100.0, 45.0]]), 20)
+    picks = []
+    compiled = opt._Level(x0, threats, 0.5, box, limits, cutoff, 1e-6, opt._Stats())
+    python = opt._Level(x0, threats, 0.5, box, limits, cutoff, 1e-6, opt._Stats())
+    for level in (compiled, python):
+        original = level.pick_pairs
+        level.pick_pairs = lambda p, o=original, lv=level: picks.append(lv) or o(p)
+    x, (_, lam), best = compiled.constrained(x0, None, opt.PENALTY_START, 200, gain=gain)
+    rx, rlam, rbest = _reference_rounds(python, x0, None, opt.PENALTY_START, 200,
+                                        opt.MAX_OUTER, gain)
+    np.testing.assert_array_equal(x, rx)
+    np.testing.assert_array_equal(lam, rlam)
+    assert (best is None) == (rbest is None)
+    if best is not None:
+        np.testing.assert_array_equal(best, rbest)
+    assert picks.count(compiled) == picks.count(python) >= (1 if cutoff is None else 2)
+    assert vars(compiled.stats) == vars(python.stats) and compiled.stats.rounds >= 3
 
 
 def test_a_known_broken_box_optimum_goes_straight_to_the_rounds(problem, monkeypatch):

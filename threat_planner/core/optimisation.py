@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS
+from threat_planner.core.lagrangian_kernels import run_rounds
 from threat_planner.core.lbfgs import minimise, objective
 from threat_planner.core.limit_kernels import LimitTerm
 from threat_planner.core.limits import FlightLimits, meets_limits
@@ -339,33 +340,29 @@ class _Level:
         scale = _scale(self.value(x, even))
         term = LimitTerm(self.limits.tightened(ANGLE_MARGIN_DEG, RADIUS_MARGIN), self.n)
         lam = np.zeros(term.rows) if lam is None else term.transfer(lam)
-        prev_violation, prev_f = np.inf, np.inf
-        best = (self.value(x, 0.0), x) if keep_start else None
-        picked = x
-        for _ in range(rounds):
-            if self.cutoff is not None and float(np.max(np.linalg.norm(
-                    x - picked, axis=1))) >= REPICK_CUTOFFS * self.cutoff:
-                # As in unconstrained: a path that moved far may near threats unseen.
-                self.pick_pairs(x)
-                picked = x
-            x = self.run(x, even, scale, maxiter, term, lam, mu)
-            c = term.values(x)
-            violation = float(np.max(-c, initial=0.0))
-            lam = np.maximum(0.0, lam - mu * c)
-            # = value(x, 0.0) and value(x, even, scale), exactly.
-            j, f = float(self.parts[0]), float(self.parts[1]) / scale
-            feasible = meets_limits(x, self.limits, self.floor)
-            if feasible:
-                # A feasible round that gained little over the last one ends the level.
-                stop = gain is not None and best is not None and best[0] - j < gain * abs(j)
-                if best is None or j < best[0]:
-                    best = (j, x)
-                if stop or abs(prev_f - f) <= OUTER_TOLERANCE * max(abs(f), 1.0):
-                    break
-            if violation > 0.25 * prev_violation:
-                mu *= PENALTY_GROWTH
-            prev_violation, prev_f = violation, f
-        return x, (term, lam), None if best is None else best[1]
+        z = np.ascontiguousarray(x, float).reshape(-1).copy()
+        best = z.copy()
+        # round, penalty, last violation, last objective, least feasible J, counters
+        state = np.array([0.0, mu, np.inf, np.inf, self.value(x, 0.0) if keep_start
+                          else np.inf, 0.0, 0.0, 0.0])
+        self.trace = np.full((rounds, 3), np.nan)
+        lim = self.limits
+        repick = np.inf if self.cutoff is None else REPICK_CUTOFFS * self.cutoff
+        while run_rounds(z, self.lo.reshape(-1), self.hi.reshape(-1), self.pairs[2],
+                         self.intensities, self.w, self.pairs[:2], _FROZEN_C2, _FROZEN_C3,
+                         self.spring, even, scale, term.kernel_args(), lam, maxiter,
+                         self.tolerance, self.max_step, self.precondition, rounds,
+                         -1.0 if gain is None else gain, PENALTY_GROWTH, OUTER_TOLERANCE,
+                         np.array([lim.max_climb_deg, lim.max_dive_deg,
+                                   lim.min_turn_radius_m, lim.min_altitude_m]),
+                         self.floor, z.copy(), repick, best, state, self.trace):
+            # As in unconstrained: a path that moved far may near threats unseen.
+            self.pick_pairs(z.reshape(self.n, 3))
+        self.stats.iterations += int(state[5])
+        self.stats.evaluations += int(state[6])
+        self.stats.rounds += int(state[7])
+        found = np.isfinite(state[4])
+        return z.reshape(self.n, 3), (term, lam), best.reshape(self.n, 3) if found else None
 
 
 _NO_THREATS = _frozen(np.zeros((0, 3)))
