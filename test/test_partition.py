@@ -32,6 +32,15 @@ def test_incentre_is_inside_and_equidistant_from_the_four_faces():
         assert np.all(lam >= -1e-12) and lam.sum() <= 1 + 1e-12
 
 
+def test_a_flat_cell_has_no_inradius_and_a_point_cell_its_point():
+    """Four coplanar corners: radius 0, centre still inside; four equal ones: that point."""
+    flat = [[0.0, 0, 0], [4, 0, 0], [0, 4, 0], [1, 1, 0]]
+    point = [[2.0, 3, 4]] * 4
+    c, r = incentres(np.array([flat, point]))
+    assert r[0] == 0.0 and c[0, 2] == 0.0 and 0 < c[0, 0] < 4 and 0 < c[0, 1] < 4
+    assert r[1] == 0.0 and c[1].tolist() == [2.0, 3.0, 4.0]
+
+
 def test_circumcentre_may_leave_the_cell_but_incentre_does_not():
     # A flat "sliver" whose circumcentre is far outside (the paper's Fig. 3 argument).
     corners = np.array([[[0.0, 0, 0], [10, 0, 0], [5, 1, 0], [5, 0.5, 0.2]]])

@@ -19,13 +19,14 @@ written: threats only, over their convex hull.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree, Delaunay, QhullError
 
 from threat_planner.errors import PlanningError
+from threat_planner.core.graph_kernels import incentre_kernel
 from threat_planner.core.threats import Box
 
 #: Growth of the box, as a fraction of its diagonal, before auxiliary vertices go on it.
@@ -107,22 +108,15 @@ def incentres(corners: NDArray) -> tuple[NDArray, NDArray]:
         corners: Vertices of each tetrahedron, shape (M, 4, 3) [m].
 
     Returns:
-        ``(centres (M, 3), radii (M,))``; radius = 3 * volume / total face area.
+        ``(centres (M, 3), radii (M,))``; radius = 3 * volume / total face area (a flat
+        cell: the mean of its vertices, radius 0).
     """
-    v0, v1, v2, v3 = (corners[:, i] for i in range(4))
-
-    def area(a: NDArray, b: NDArray, c: NDArray) -> NDArray:
-        return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-
-    # Face i is the one opposite vertex i.
-    areas = np.stack([area(v1, v2, v3), area(v0, v2, v3), area(v0, v1, v3),
-                      area(v0, v1, v2)], axis=1)
-    total = areas.sum(axis=1)
-    safe = np.where(total > 0, total, 1.0)
-    centres = np.einsum('mi,mik->mk', areas, corners) / safe[:, None]
-    centres = np.where(total[:, None] > 0, centres, corners.mean(axis=1))
-    volume = np.abs(np.einsum('mk,mk->m', v1 - v0, np.cross(v2 - v0, v3 - v0))) / 6.0
-    return centres, 3.0 * volume / safe
+    corners = np.ascontiguousarray(corners, float)
+    centres = np.empty((len(corners), 3))
+    radii = np.empty(len(corners))
+    # Compiled: numpy's dozen whole-array steps cost 0.26 ms on 175 cells, 47 ms on 65,000.
+    incentre_kernel(corners, centres, radii)
+    return centres, radii
 
 
 def box_surface_points(box: Box, divisions: int) -> NDArray:
@@ -135,10 +129,25 @@ def box_surface_points(box: Box, divisions: int) -> NDArray:
     Returns:
         Array (P, 3) of points [m].
     """
+    return box.lo + _unit_surface(divisions) * (box.hi - box.lo)
+
+
+@lru_cache(maxsize=4)
+def _unit_surface(divisions: int) -> NDArray:
+    """Return the lattice on the unit cube's surface (read-only: shared)."""
     ticks = np.linspace(0.0, 1.0, divisions + 1)
     g = np.stack(np.meshgrid(ticks, ticks, ticks, indexing='ij'), axis=-1).reshape(-1, 3)
-    on_surface = np.any((g == 0.0) | (g == 1.0), axis=1)
-    return box.lo + g[on_surface] * (box.hi - box.lo)
+    out = g[np.any((g == 0.0) | (g == 1.0), axis=1)]
+    out.setflags(write=False)
+    return out
+
+
+@lru_cache(maxsize=4)
+def _jitter(count: int) -> NDArray:
+    """Return the fixed jitter of ``count`` auxiliary points, in box diagonals (read-only)."""
+    out = np.random.default_rng(0).uniform(-1e-6, 1e-6, (count, 3))
+    out.setflags(write=False)
+    return out
 
 
 def merge_duplicates(positions: NDArray, tolerance: float) -> NDArray:
@@ -184,7 +193,7 @@ def build_network(positions: NDArray, box: Box, box_divisions: int = 2) -> Netwo
     aux = box_surface_points(grown, box_divisions)
     # A lattice on a box is highly co-spherical, which makes the Delaunay cells ambiguous;
     # a fixed tiny jitter picks one tiling reproducibly.
-    aux = aux + np.random.default_rng(0).uniform(-1e-6, 1e-6, aux.shape) * diag
+    aux = aux + _jitter(len(aux)) * diag
     # Threats that sit on an auxiliary point (or outside the grown box) keep priority.
     keep_aux = cKDTree(threat_pts).query(aux)[0] > MERGE_TOLERANCE * diag \
         if len(threat_pts) else np.ones(len(aux), dtype=bool)
