@@ -11,8 +11,11 @@ Writes ``bench/results/speed.md`` and ``speed.json``. Rows, side by side in one 
   (``bench/results/yardstick.json``, SLSQP from many starts at 60 segments, same limits),
   for the cases that file holds.
 
-Times are wall clock of ``plan()`` (kernels compiled beforehand), one run per cell; the
-machine is shared, so the ratios in one run mean more than the absolute times.
+Times are wall clock of ``plan()`` (kernels compiled beforehand), the median of
+``--repeats`` runs per 20-threat cell (3: the plans are deterministic, so the runs differ
+only by the load of the machine, which is shared; single runs moved the 20-threat median
+by 20-50 % between runs of the same code); the ratios in one run mean more than the
+absolute times.
 
 Usage: ``PYTHONPATH=. python bench/run_speed.py [--no-scale]``
 """
@@ -49,7 +52,14 @@ def _timed(*args, **kwargs):
     return r, 1e3 * (time.perf_counter() - t0)
 
 
-def twenty_threat_rows() -> list[dict]:
+def _timed_median(repeats: int, *args, **kwargs):
+    """Plan ``repeats`` times; the result and the median and every wall time [ms]."""
+    runs = [_timed(*args, **kwargs) for _ in range(max(repeats, 1))]
+    times = [ms for _, ms in runs]
+    return runs[0][0], statistics.median(times), times
+
+
+def twenty_threat_rows(repeats: int = 3) -> list[dict]:
     """Cold and warm plans of every bundled 20-threat scenario, limits on and off."""
     rows = []
     for name in SCENARIOS:
@@ -63,13 +73,15 @@ def twenty_threat_rows() -> list[dict]:
         for w in WS:
             for label, lim in (('on', {}), ('off', NO_LIMITS)):
                 cfg = PlannerConfig(w=w, **lim)
-                cold, ms = _timed(sc.threats, sc.start, sc.goal, sc.box, cfg)
+                cold, ms, runs = _timed_median(repeats, sc.threats, sc.start, sc.goal, sc.box,
+                                               cfg)
                 start = cold.path[3]
-                warm, warm_ms = _timed(moved, start, sc.goal, sc.box, cfg, warm_start=cold)
+                warm, warm_ms, _ = _timed_median(repeats, moved, start, sc.goal, sc.box, cfg,
+                                                 warm_start=cold)
                 recold, recold_ms = _timed(moved, start, sc.goal, sc.box, cfg)
                 rows.append({
                     'case': f'{name}@{w}', 'limits': label, 'J': cold.cost.J,
-                    'feasible': cold.feasible, 'ms': ms, 'seed': cold.seed,
+                    'feasible': cold.feasible, 'ms': ms, 'ms_runs': runs, 'seed': cold.seed,
                     'worst_violation': cold.limit_check.worst,
                     'warm': warm.warm, 'warm_note': warm.warm_note, 'warm_ms': warm_ms,
                     'warm_J': warm.cost.J, 'recold_J': recold.cost.J, 'recold_ms': recold_ms})
@@ -117,7 +129,8 @@ def _verdict(value: float, target: float) -> str:
     return f'{"met" if value <= target else "MISSED"} ({value:.0f} vs <= {target:g} ms)'
 
 
-def write_markdown(cold: list[dict], scale: list[dict], quality: list[dict]) -> str:
+def write_markdown(cold: list[dict], scale: list[dict], quality: list[dict],
+                   repeats: int = 3) -> str:
     """Render speed.md."""
     on = [r for r in cold if r['limits'] == 'on']
     off = [r for r in cold if r['limits'] == 'off']
@@ -128,7 +141,9 @@ def write_markdown(cold: list[dict], scale: list[dict], quality: list[dict]) -> 
         '',
         f'Written by `bench/run_speed.py` on {time.strftime("%Y-%m-%d")} on a 2-core '
         'machine shared with other engineers\' jobs: absolute times are inflated and noisy; '
-        'compare the columns of one run. One run per cell, kernels compiled beforehand.',
+        f'compare the columns of one run. 20 threats: the median of {repeats} runs per cell '
+        '(speed.json lists them; warm too); 1,000 and 10,000: one run; kernels compiled '
+        'beforehand.',
         '',
         f'Limits on = the defaults {PHYSICAL_LIMITS} (climb / dive atan2(+-dz, horizontal), '
         'circumradius through every 3 consecutive points); off = 90 / 90 / 0.',
@@ -205,6 +220,8 @@ def main() -> None:
     """Run the rows and write the results."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--no-scale', action='store_true', help='skip 1,000 / 10,000 threats')
+    ap.add_argument('--repeats', type=int, default=3,
+                    help='runs per 20-threat cell, the median reported (default 3)')
     args = ap.parse_args()
     warm_up()
     warm_up_limits()
@@ -216,13 +233,13 @@ def main() -> None:
     if not args.no_scale:
         # The cut-off and parallel kernels of large fields too.
         plan(*bt.scale_problem(1000), PlannerConfig(w=0.5))
-    cold = twenty_threat_rows()
+    cold = twenty_threat_rows(args.repeats)
     scale = [] if args.no_scale else scale_rows()
     quality = quality_rows(cold)
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / 'speed.json').write_text(json.dumps(
         {'twenty': cold, 'scale': scale, 'quality': quality}, indent=1, default=str))
-    (RESULTS / 'speed.md').write_text(write_markdown(cold, scale, quality))
+    (RESULTS / 'speed.md').write_text(write_markdown(cold, scale, quality, args.repeats))
     print((RESULTS / 'speed.md').read_text())
 
 

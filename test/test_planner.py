@@ -135,3 +135,37 @@ def test_large_field_uses_the_cut_off_and_reports_exact_cost():
     assert r.cost.J == pytest.approx(path_cost(r.path, th.positions, th.intensities, 0.5).J)
     straight = path_cost(np.vstack([start, goal]), th.positions, th.intensities, 0.5).J
     assert r.cost.J < straight
+
+
+_FIRST_PLANS = r'''
+import sys, threading
+import numpy as np
+from threat_planner.core import planner
+from threat_planner.core.threats import Box, ThreatField
+rng = np.random.default_rng(8)
+n = int(sys.argv[1])
+side = 100 * (n / 20) ** (1 / 3)
+th = ThreatField.from_arrays(rng.uniform(0, side, (n, 3)), rng.uniform(1e5, 4e5, n))
+box = Box.from_corners([0, 0, 0], [side] * 3)
+s, t = np.array([0.0, 0.0, side / 2]), np.array([side, side, side / 2])
+first = planner.plan(th, s, t, box, planner.PlannerConfig(w=0.5))
+loader = planner._LOADER['thread']
+print(loader is not None, loader is not None and loader.is_alive(), threading.active_count())
+second = planner.plan(th, s, t, box, planner.PlannerConfig(w=0.5))
+print(planner._LOADER['thread'] is loader, np.array_equal(first.path, second.path),
+      first.cost.J == second.cost.J)
+'''
+
+
+@pytest.mark.parametrize('big', [False, True])
+def test_a_big_first_plan_loads_the_kernels_beside_the_delaunay_and_plans_the_same(big):
+    """Fresh process: from LOADER_THREATS threats the first plan starts the loading
+    thread once and joins it (none left running); its plan is the next plan's, bit for bit."""
+    import subprocess
+    import sys
+    from threat_planner.core.planner import LOADER_THREATS
+    n = LOADER_THREATS if big else 100
+    out = subprocess.run([sys.executable, '-c', _FIRST_PLANS, str(n)], capture_output=True,
+                         text=True, check=True, timeout=240).stdout.split('\n')
+    assert out[0] == f'{big} False 1'
+    assert out[1] == 'True True True'
