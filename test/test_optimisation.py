@@ -210,3 +210,22 @@ def test_the_hot_loop_s_feasibility_is_check_limits_verdict():
         assert meets_limits(pts, limits, 0.0) == full.feasible
         verdicts.update(full.violations or {'none'})
     assert verdicts == {'none', 'climb_deg', 'dive_deg', 'turn_radius_m', 'altitude_m'}
+
+
+def test_constrained_only_runs_the_rounds_at_the_start_s_resolution(problem, monkeypatch):
+    """A warm start: no box-only run and no coarser level, whether or not it meets the
+    limits; where it does not, the answer still does."""
+    from threat_planner.core import optimisation as opt
+    threats, box, start, goal = problem
+    limits = FlightLimits(8.0, 8.0, 20.0, 0.0)
+    calls = []
+    original = opt._Level.unconstrained
+    monkeypatch.setattr(opt._Level, 'unconstrained',
+                        lambda self, x, maxiter: calls.append(1) or original(self, x, maxiter))
+    kinked = resample(np.vstack([start, [60.0, 40.0, 75.0], goal]), 40)
+    assert not check_limits(kinked, limits, 0.0).feasible
+    res = minimise_cost(kinked, threats, 0.5, box, limits, constrained_only=True)
+    assert calls == [] and res.levels == () and res.constrained
+    assert check_limits(res.points, limits, 0.0).feasible
+    minimise_cost(kinked, threats, 0.5, box, limits)
+    assert calls and len(minimise_cost(kinked, threats, 0.5, box, limits).levels) == 2

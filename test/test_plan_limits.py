@@ -142,3 +142,27 @@ def test_crowded_fields_always_replan_cold():
     first = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
     again = plan(sc.threats, first.path[1], sc.goal, sc.box, cfg, warm_start=first)
     assert not again.warm and again.warm_note.startswith('cold: crowded field')
+
+
+def test_a_warm_start_that_breaks_a_limit_refines_at_full_resolution_no_worse_than_cold():
+    """The speed bench's uniform20_0 at w 0.5: the previous path from the new start,
+    resampled, breaks a limit; the warm replan still ends at or below the cold plan."""
+    from threat_planner.core.limits import check_limits, FlightLimits
+    from threat_planner.core.warm import warm_path
+    sc = load_scenario(DATA + 'uniform20_0.yaml')
+    cfg = PlannerConfig(w=0.5)
+    first = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
+    diag = sc.box.diagonal
+    rng = np.random.default_rng(7)
+    moved = ThreatField.from_arrays(
+        sc.threats.positions
+        + rng.uniform(-1, 1, sc.threats.positions.shape) * 0.005 * diag / np.sqrt(3),
+        sc.threats.intensities)
+    start = first.path[3]
+    path, note = warm_path(first, moved, start, sc.goal, sc.box, cfg)
+    assert note == 'warm'
+    assert not check_limits(path, FlightLimits.of(cfg), float(sc.box.lo[2])).feasible
+    warm = plan(moved, start, sc.goal, sc.box, cfg, warm_start=first)
+    cold = plan(moved, start, sc.goal, sc.box, cfg)
+    assert warm.warm and warm.feasible
+    assert warm.cost.J <= cold.cost.J * (1 + 1e-6)
