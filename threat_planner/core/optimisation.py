@@ -219,10 +219,10 @@ class _Stats:
     def __init__(self) -> None:
         self.iterations = self.evaluations = self.rounds = 0
 
-    def add(self, nit: int, nfev: int) -> None:
+    def add(self, nit: int, nfev: int, runs: int = 1) -> None:
         self.iterations += nit
         self.evaluations += nfev
-        self.rounds += 1
+        self.rounds += runs
 
     def result(self, x: NDArray, constrained: bool, levels: tuple = ()
                ) -> OptimisationResult:
@@ -361,9 +361,7 @@ class _Level:
                          self.floor, z.copy(), repick, best, state, self.trace):
             # As in unconstrained: a path that moved far may near threats unseen.
             self.pick_pairs(z.reshape(self.n, 3))
-        self.stats.iterations += int(state[5])
-        self.stats.evaluations += int(state[6])
-        self.stats.rounds += int(state[7])
+        self.stats.add(int(state[5]), int(state[6]), int(state[7]))
         found = np.isfinite(state[4])
         return z.reshape(self.n, 3), (term, lam), best.reshape(self.n, 3) if found else None
 
