@@ -545,3 +545,15 @@ def scale_problem(n: int, seed: int = 0) -> tuple[ThreatField, NDArray, NDArray,
     start = np.array([0.0, 0.0, side / 2])
     goal = np.array([side, side, side / 2])
     return ThreatField.from_arrays(positions, intensities), start, goal, box
+
+
+def moved_threats(threats: ThreatField, diagonal: float, seed: int = 7,
+                  fraction: float = 0.005) -> ThreatField:
+    """Return the threats each moved by at most ``fraction`` of the box diagonal.
+
+    The speed bench's small change for warm replans: every coordinate shifted uniformly by
+    up to ``fraction * diagonal / sqrt(3)`` [m] (random ``seed``), intensities kept.
+    """
+    rng = np.random.default_rng(seed)
+    shift = rng.uniform(-1, 1, threats.positions.shape) * fraction * diagonal / np.sqrt(3)
+    return ThreatField.from_arrays(threats.positions + shift, threats.intensities)

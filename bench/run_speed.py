@@ -28,14 +28,12 @@ import statistics
 import time
 
 import _repo  # noqa: F401  (puts the repository root on sys.path)
-import numpy as np
 
 import bench_tools as bt
 from threat_planner import load_scenario, plan, PlannerConfig
 from threat_planner.core.kernels import warm_up
 from threat_planner.core.limit_kernels import warm_up as warm_up_limits
 from threat_planner.core.settings import NO_LIMITS, PHYSICAL_LIMITS
-from threat_planner.core.threats import ThreatField
 
 ROOT = _repo.ROOT
 RESULTS = ROOT / 'bench' / 'results'
@@ -64,12 +62,7 @@ def twenty_threat_rows(repeats: int = 3) -> list[dict]:
     rows = []
     for name in SCENARIOS:
         sc = load_scenario(ROOT / 'test' / 'data' / f'{name}.yaml')
-        diag = sc.box.diagonal
-        rng = np.random.default_rng(7)
-        moved = ThreatField.from_arrays(
-            sc.threats.positions
-            + rng.uniform(-1, 1, sc.threats.positions.shape) * 0.005 * diag / np.sqrt(3),
-            sc.threats.intensities)
+        moved = bt.moved_threats(sc.threats, sc.box.diagonal)
         for w in WS:
             for label, lim in (('on', {}), ('off', NO_LIMITS)):
                 cfg = PlannerConfig(w=w, **lim)

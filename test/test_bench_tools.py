@@ -200,3 +200,16 @@ def test_random_fields_are_reproducible_and_the_summary_lists_the_movers():
     line, rows = rf._summary(before, after, 'on')
     assert '3 plans' in line and 'worst 1.0010' in line and 'infeasible after: 1' in line
     assert [r.split(' |')[0] for r in rows] == ['| b on', '| c on']
+
+
+def test_moved_threats_stay_within_the_fraction_of_the_diagonal():
+    """The warm-replan move: every threat within 0.5 % of the diagonal, same seed same
+    field, intensities untouched."""
+    sc = load_scenario(DATA / 'uniform20_0.yaml')
+    diag = sc.box.diagonal
+    moved = bt.moved_threats(sc.threats, diag)
+    shift = np.linalg.norm(moved.positions - sc.threats.positions, axis=1)
+    assert shift.max() <= 0.005 * diag and shift.min() > 0
+    np.testing.assert_array_equal(moved.intensities, sc.threats.intensities)
+    np.testing.assert_array_equal(bt.moved_threats(sc.threats, diag).positions,
+                                  moved.positions)

@@ -1,6 +1,7 @@
 """Plans under the physical flight limits, their report, and warm starts."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -144,20 +145,24 @@ def test_crowded_fields_always_replan_cold():
     assert not again.warm and again.warm_note.startswith('cold: crowded field')
 
 
+def _bench_tools():
+    """The bench's helpers (bench/bench_tools.py), for its exact warm-replan move."""
+    import importlib
+    import sys
+    bench = str(Path(__file__).resolve().parents[1] / 'bench')
+    if bench not in sys.path:
+        sys.path.insert(0, bench)
+    return importlib.import_module('bench_tools')
+
+
 def test_a_warm_start_that_breaks_a_limit_refines_at_full_resolution_no_worse_than_cold():
     """The speed bench's uniform20_0 at w 0.5: the previous path from the new start,
     resampled, breaks a limit; the warm replan still ends at or below the cold plan."""
-    from threat_planner.core.limits import check_limits, FlightLimits
     from threat_planner.core.warm import warm_path
     sc = load_scenario(DATA + 'uniform20_0.yaml')
     cfg = PlannerConfig(w=0.5)
     first = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
-    diag = sc.box.diagonal
-    rng = np.random.default_rng(7)
-    moved = ThreatField.from_arrays(
-        sc.threats.positions
-        + rng.uniform(-1, 1, sc.threats.positions.shape) * 0.005 * diag / np.sqrt(3),
-        sc.threats.intensities)
+    moved = _bench_tools().moved_threats(sc.threats, sc.box.diagonal)
     start = first.path[3]
     path, note = warm_path(first, moved, start, sc.goal, sc.box, cfg)
     assert note == 'warm'
