@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from threat_planner.core.cost import path_cost
+from threat_planner.core.lbfgs import objective_scale
 from threat_planner.core.limits import check_limits, FlightLimits
 from threat_planner.core.optimisation import minimise_cost
 from threat_planner.core.smoothing import resample
@@ -116,7 +117,7 @@ def _reference_rounds(level, x, lam, mu, maxiter, rounds, gain):
     x = level.clip(x)
     level.pick_pairs(x)
     even = opt.EVEN_SPACING_WEIGHT * level.spring_unit
-    scale = opt._scale(level.value(x, even))
+    scale = float(objective_scale(level.value(x, even)))
     term = LimitTerm(level.limits.tightened(opt.ANGLE_MARGIN_DEG, opt.RADIUS_MARGIN), level.n)
     lam = np.zeros(term.rows) if lam is None else term.transfer(lam)
     prev_violation, prev_f, best, picked = np.inf, np.inf, None, x

@@ -31,7 +31,7 @@ from threat_planner.core.kernels import (_kernel, _kernel_split, njit, parallel_
                                          PARALLEL_PAIRS)
 from threat_planner.core.limit_kernels import _penalty
 
-__all__ = ['minimise', 'objective']
+__all__ = ['minimise', 'objective', 'objective_scale']
 
 #: Armijo constant and the backtracking factor of the line search.
 _ARMIJO = 1e-4
@@ -107,6 +107,12 @@ def _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale, li
 
 
 @njit(cache=True)
+def objective_scale(value):
+    """Scale of the objective from its value at the start: |value|, finite and positive."""
+    return max(abs(value), 1e-12) if math.isfinite(value) and value < 1e299 else 1.0
+
+
+@njit(cache=True)
 def _tri_solve(v, free, n1, out, cp, dp):
     """Solve L out = v per axis, L the second-difference matrix of the free vertices.
 
@@ -139,11 +145,10 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
               parts):
     """Projected L-BFGS from x0 within [lo, hi] (preconditioned if pre); minimiser into out.
 
-    ``scale`` <= 0: the value of J + spacing terms at the start (finite, positive), as
-    the caller's ``_scale`` would take it. ``parts`` receives :func:`_objective`'s parts at
-    the minimiser. Returns (value, iterations, evaluations, why it stopped: 0 small
-    decrease, 1 small gradient, 2 no step accepted, 3 iteration limit, 4 a vertex moved
-    beyond reach).
+    ``scale`` <= 0: :func:`objective_scale` of J + spacing terms at the start. ``parts``
+    receives :func:`_objective`'s parts at the minimiser. Returns (value, iterations,
+    evaluations, why it stopped: 0 small decrease, 1 small gradient, 2 no step accepted,
+    3 iteration limit, 4 a vertex moved beyond reach).
     """
     nv = x0.shape[0]
     n1 = nv // 3
@@ -154,8 +159,7 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
                     1.0 if scale <= 0.0 else scale, lim, lam, mu, gbuf, pgrad, g, parts)
     if scale <= 0.0:
         # (j / 1) / s is j / s exactly: the same start as a call given s.
-        v = parts[1]
-        scale = max(abs(v), 1e-12) if math.isfinite(v) and v < 1e299 else 1.0
+        scale = objective_scale(parts[1])
         if lim[6] > 0.0:
             fx = _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale,
                             lim, lam, mu, gbuf, pgrad, g, parts)

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS
 from threat_planner.core.lagrangian_kernels import run_rounds
-from threat_planner.core.lbfgs import minimise, objective
+from threat_planner.core.lbfgs import minimise, objective, objective_scale
 from threat_planner.core.limit_kernels import LimitTerm
 from threat_planner.core.limits import FlightLimits, meets_limits
 from threat_planner.core.smoothing import resample
@@ -340,7 +340,7 @@ class _Level:
         x = self.clip(x)
         self.pick_pairs(x)
         even = EVEN_SPACING_WEIGHT * self.spring_unit
-        scale = _scale(self.value(x, even))
+        scale = float(objective_scale(self.value(x, even)))
         term = LimitTerm(self.limits.tightened(ANGLE_MARGIN_DEG, RADIUS_MARGIN), self.n)
         lam = np.zeros(term.rows) if lam is None else term.transfer(lam)
         z = np.ascontiguousarray(x, float).reshape(-1).copy()
@@ -399,8 +399,3 @@ def is_crowded(threats: ThreatField, box: Box | None) -> bool:
         return False
     reach = threats.median_intensity ** 0.25
     return reach >= CROWDED_REACH * threats.typical_spacing(box)
-
-
-def _scale(value: float) -> float:
-    """Objective scale: its value at the start (finite, positive)."""
-    return max(abs(value), 1e-12) if np.isfinite(value) and value < 1e299 else 1.0

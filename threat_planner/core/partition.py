@@ -108,8 +108,8 @@ def incentres(corners: NDArray) -> tuple[NDArray, NDArray]:
         corners: Vertices of each tetrahedron, shape (M, 4, 3) [m].
 
     Returns:
-        ``(centres (M, 3), radii (M,))``; radius = 3 * volume / total face area (a flat
-        cell: the mean of its vertices, radius 0).
+        ``(centres (M, 3), radii (M,))``; radius = 3 * volume / total face area (a cell
+        without volume has radius 0; one without area, its vertices' mean as centre).
     """
     corners = np.ascontiguousarray(corners, float)
     centres = np.empty((len(corners), 3))

@@ -6,9 +6,10 @@ The methods themselves are in :mod:`threat_planner.core.methods`; settings in
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from functools import lru_cache
 import threading
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -99,7 +100,7 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         airspace = None
     # The optimisers make thousands of tiny BLAS calls; a threaded BLAS spends longer waking
     # its threads than computing, and far longer when the cores are busy (measured: 4x).
-    with _blas().limit(limits=1, user_api='blas'):
+    with _blas().limit(limits=1, user_api='blas'), _joining_kernels():
         note = ''
         if warm_start is not None and airspace is None:
             warm = _plan_warm(warm_start, threats, s, t, box, config)
@@ -108,7 +109,6 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
             note = warm
         result = _plan(threats, s, t, box, config, progress, airspace, on_initial)
         result.warm_note = note
-        _wait_for_kernels()
         return result
 
 
@@ -127,7 +127,7 @@ def _load_kernels() -> None:
     loads it from the cache: 0.2-0.25 s before a fresh process's first plan could start
     (10,000 threats: the partition took 573-593 ms in a fresh process against 230-290
     in-process). Qhull releases the GIL, so a thread that plans a tiny field meanwhile
-    overlaps it with the Delaunay (348-366 ms); :func:`_wait_for_kernels` joins it.
+    overlaps it with the Delaunay (348-366 ms); the plan joins it before it returns.
     """
     with _LOADER['lock']:
         if _LOADER['thread'] is not None:
@@ -137,15 +137,22 @@ def _load_kernels() -> None:
     _LOADER['thread'].start()
 
 
-def _wait_for_kernels() -> None:
-    """Join the loading thread (a no-op in it, and once it has finished)."""
-    thread = _LOADER['thread']
-    if thread is not None and thread is not threading.current_thread():
-        thread.join()
+@contextmanager
+def _joining_kernels() -> Iterator[None]:
+    """Join the loading thread on the way out of a plan (not from the thread itself)."""
+    try:
+        yield
+    finally:
+        thread = _LOADER['thread']
+        if thread is not None and thread is not threading.current_thread():
+            thread.join()
 
 
 def _tiny_plan() -> None:
-    """Plan a 6-threat field with the default settings, and cost edges under a cut-off."""
+    """Plan a 16-threat field with the default settings; cost edges under a cut-off.
+
+    16 threats: enough for the surface lattice's costs to run in parallel, as in a big plan.
+    """
     from threat_planner.core.near_kernels import near_segment_costs
     rng = np.random.default_rng(0)
     threats = ThreatField.from_arrays(rng.uniform(20.0, 80.0, (16, 3)), np.full(16, 1e4))
