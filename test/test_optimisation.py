@@ -193,7 +193,9 @@ def test_a_known_broken_box_optimum_goes_straight_to_the_rounds(problem, monkeyp
 
 
 def test_the_hot_loop_s_feasibility_is_check_limits_verdict():
-    """meets_limits says what check_limits(...).feasible says, near every limit."""
+    """meets_limits and the compiled rounds' check say what check_limits(...).feasible
+    says, near every limit."""
+    from threat_planner.core.lagrangian_kernels import _meets
     from threat_planner.core.limits import meets_limits
     rng = np.random.default_rng(3)
     limits = FlightLimits(20.0, 25.0, 15.0, 5.0)
@@ -209,6 +211,9 @@ def test_the_hot_loop_s_feasibility_is_check_limits_verdict():
         pts[:, 2] -= min(0.0, pts[1:-1, 2].min() - rng.uniform(3.0, 8.0))
         full = check_limits(pts, limits, 0.0)
         assert meets_limits(pts, limits, 0.0) == full.feasible
+        assert _meets(np.ascontiguousarray(pts), 0.0, np.array(
+            [limits.max_climb_deg, limits.max_dive_deg, limits.min_turn_radius_m,
+             limits.min_altitude_m])) == full.feasible
         verdicts.update(full.violations or {'none'})
     assert verdicts == {'none', 'climb_deg', 'dive_deg', 'turn_radius_m', 'altitude_m'}
 
