@@ -22,12 +22,29 @@ from threat_planner.core.lbfgs import _minimise
 from threat_planner.core.limit_kernels import _measure, _values
 from threat_planner.core.limits import CHECK_SLACK
 
-__all__ = ['STATE', 'run_rounds']
+__all__ = ['STATE', 'counters', 'has_best', 'new_state', 'run_rounds']
 
 #: Slots of the state array: next round, penalty, last violation, last objective, least
 #: feasible J (inf: none yet), L-BFGS iterations, evaluations and runs so far.
 STATE = ('round', 'mu', 'violation', 'f', 'best_j', 'iterations', 'evaluations', 'runs')
 _ROUND, _MU, _VIOLATION, _F, _BEST_J, _NIT, _NFEV, _RUNS = range(len(STATE))
+
+
+def new_state(mu: float, best_j: float = math.inf) -> np.ndarray:
+    """Return the state of rounds about to start at penalty mu (best_j: a start's J)."""
+    state = np.zeros(len(STATE))
+    state[_MU], state[_VIOLATION], state[_F], state[_BEST_J] = mu, math.inf, math.inf, best_j
+    return state
+
+
+def counters(state: np.ndarray) -> tuple[int, int, int]:
+    """Return the L-BFGS iterations, evaluations and runs the rounds made."""
+    return int(state[_NIT]), int(state[_NFEV]), int(state[_RUNS])
+
+
+def has_best(state: np.ndarray) -> bool:
+    """Whether the rounds (or the start) hold a feasible answer."""
+    return bool(np.isfinite(state[_BEST_J]))
 
 
 @njit(cache=True)

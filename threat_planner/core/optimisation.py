@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS
-from threat_planner.core.lagrangian_kernels import run_rounds
+from threat_planner.core.lagrangian_kernels import counters, has_best, new_state, run_rounds
 from threat_planner.core.lbfgs import minimise, objective, objective_scale
 from threat_planner.core.limit_kernels import LimitTerm
 from threat_planner.core.limits import FlightLimits, meets_limits
@@ -345,9 +345,7 @@ class _Level:
         lam = np.zeros(term.rows) if lam is None else term.transfer(lam)
         z = np.ascontiguousarray(x, float).reshape(-1).copy()
         best = z.copy()
-        # round, penalty, last violation, last objective, least feasible J, counters
-        state = np.array([0.0, mu, np.inf, np.inf, self.value(x, 0.0) if keep_start
-                          else np.inf, 0.0, 0.0, 0.0])
+        state = new_state(mu, self.value(x, 0.0) if keep_start else np.inf)
         self.trace = np.full((rounds, 3), np.nan)
         lim = self.limits
         repick = np.inf if self.cutoff is None else REPICK_CUTOFFS * self.cutoff
@@ -361,9 +359,9 @@ class _Level:
                          self.floor, z.copy(), repick, best, state, self.trace):
             # As in unconstrained: a path that moved far may near threats unseen.
             self.pick_pairs(z.reshape(self.n, 3))
-        self.stats.add(int(state[5]), int(state[6]), int(state[7]))
-        found = np.isfinite(state[4])
-        return z.reshape(self.n, 3), (term, lam), best.reshape(self.n, 3) if found else None
+        self.stats.add(*counters(state))
+        return (z.reshape(self.n, 3), (term, lam),
+                best.reshape(self.n, 3) if has_best(state) else None)
 
 
 _NO_THREATS = _frozen(np.zeros((0, 3)))
