@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from threat_planner.core.cost import path_cost
-from threat_planner.core.lbfgs import objective_scale
+from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3
+from threat_planner.core.lbfgs import minimise, objective_scale
 from threat_planner.core.limits import check_limits, FlightLimits
 from threat_planner.core.optimisation import minimise_cost
 from threat_planner.core.smoothing import resample
@@ -126,7 +127,14 @@ def _reference_rounds(level, x, lam, mu, maxiter, rounds, gain):
                 x - picked, axis=1))) >= opt.REPICK_CUTOFFS * level.cutoff:
             level.pick_pairs(x)
             picked = x
-        x = level.run(x, even, scale, maxiter, term, lam, mu)
+        z, _, nit, nfev = minimise(
+            x.reshape(-1).copy(), level.lo.reshape(-1), level.hi.reshape(-1), level.pairs[2],
+            level.intensities, level.w, level.pairs[:2], _FROZEN_C2, _FROZEN_C3,
+            level.spring, even, scale, term.kernel_args(), lam, mu, np.zeros(term.rows),
+            np.zeros((level.n, 3)), maxiter, level.tolerance, max_step=level.max_step,
+            precondition=level.precondition)
+        level.stats.add(nit, nfev)
+        x = z.reshape(level.n, 3)
         c = term.values(x)
         violation = float(np.max(-c, initial=0.0))
         lam = np.maximum(0.0, lam - mu * c)

@@ -259,7 +259,6 @@ class _Level:
         self.intensities = _frozen(threats.intensities)
         self.pairs = (_NO_PAIRS, _NO_PAIRS, self.positions)
         self._off = (np.zeros(7), np.zeros(0), np.zeros((n, 3)))
-        self.parts = np.zeros(2)
 
     def clip(self, x: NDArray) -> NDArray:
         """Move the path's interior vertices into the bounds."""
@@ -285,23 +284,15 @@ class _Level:
                          self.spring, even, scale, self._off[0], self._off[1], 1.0,
                          self._off[1], self._off[2], grad)
 
-    def run(self, p: NDArray, even: float, scale: float, maxiter: int,
-            term: LimitTerm | None = None, lam: NDArray | None = None,
-            mu: float = 1.0, reach: float = np.inf) -> NDArray:
-        """One L-BFGS run from p (scale <= 0: by its value); the minimiser, (n, 3).
-
-        ``self.parts``: then the minimiser's ``value(x, 0.0)`` and ``value(x, even, 1)``.
-        """
-        if term is None:
-            lim, lam, gbuf, pgrad = self._off[0], self._off[1], self._off[1], self._off[2]
-        else:
-            lim, gbuf, pgrad = term.kernel_args(), np.zeros(term.rows), np.zeros((self.n, 3))
+    def run(self, p: NDArray, maxiter: int, reach: float = np.inf) -> NDArray:
+        """One box-only L-BFGS run from p, scaled by its value; the minimiser, (n, 3)."""
+        off = self._off
         z, _, nit, nfev = minimise(
             np.ascontiguousarray(p, float).reshape(-1), self.lo.reshape(-1),
             self.hi.reshape(-1), self.pairs[2], self.intensities, self.w, self.pairs[:2],
-            _FROZEN_C2, _FROZEN_C3, self.spring, even, scale, lim, lam, mu, gbuf, pgrad,
-            maxiter, self.tolerance, max_step=self.max_step, precondition=self.precondition,
-            reach=reach, parts=self.parts)
+            _FROZEN_C2, _FROZEN_C3, self.spring, 0.0, 0.0, off[0], off[1], 1.0, off[1],
+            off[2], maxiter, self.tolerance, max_step=self.max_step,
+            precondition=self.precondition, reach=reach)
         self.stats.add(nit, nfev)
         return z.reshape(self.n, 3)
 
@@ -317,7 +308,7 @@ class _Level:
         for _ in range(MAX_PAIR_ROUNDS if self.cutoff is not None else 1):
             self.pick_pairs(x)
             # Dimensionless objective: the tolerances then mean the same everywhere.
-            moved = self.run(x, 0.0, 0.0, maxiter, reach=reach)
+            moved = self.run(x, maxiter, reach)
             shift = float(np.max(np.linalg.norm(moved - x, axis=1)))
             x = moved
             if self.cutoff is None or shift < REPICK_CUTOFFS * self.cutoff:
