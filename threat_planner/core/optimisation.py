@@ -326,7 +326,8 @@ class _Level:
         level starts at penalty ``mu``: carrying the coarse level's grown penalty made the
         fine rounds too stiff (uniform20_0 at w 0.8: infeasible, J +12 %).
         ``gain`` also stops at a feasible round that lowered J by less than that fraction
-        from the best feasible one before (the finest level, FINEST_GAIN).
+        from the best feasible one before (the finest level, FINEST_GAIN). Afterwards
+        ``self.trace`` (rounds, 3) holds each round's J, feasibility and violation.
         """
         x = self.clip(x)
         self.pick_pairs(x)
