@@ -4,9 +4,11 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from threat_planner.core.cost import (pair_threat_costs, path_cost, segment_threat_costs)
+from threat_planner.core.cost import (cost_and_gradient, pair_threat_costs, path_cost,
+                                      segment_threat_costs)
 from threat_planner.core.kernels import (_FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS,
-                                         path_cost as compiled_path_cost, segment_costs)
+                                         cost_gradient, path_cost as compiled_path_cost,
+                                         segment_costs)
 from threat_planner.core.lbfgs import _objective, _tri_solve, minimise
 from threat_planner.core.limit_kernels import LimitTerm, measure
 from threat_planner.core.limits import climb_angles, FlightLimits, turn_radii
@@ -50,6 +52,29 @@ def test_compiled_path_cost_is_the_reference_cost():
     assert got.J == pytest.approx(ref.J, rel=1e-13)
     assert got.J_R == pytest.approx(ref.J_R, rel=1e-13)
     assert got.J_L == ref.J_L
+
+
+@pytest.mark.parametrize('order', ['dense', 'by segment', 'shuffled'])
+def test_compiled_gradient_is_the_numpy_closed_form(order):
+    # The kernel sums each segment's run of pairs in registers: every pair order (a
+    # cut-off's pairs come sorted by segment, any order must do) gives numpy's J and
+    # gradient, zero-length segments included.
+    rng = np.random.default_rng(7)
+    pts = np.cumsum(rng.uniform(-3, 6, (31, 3)), axis=0)
+    pts[9] = pts[8]
+    pos, f = rng.uniform(-10, 120, (25, 3)), rng.uniform(1, 50, 25)
+    pairs = None
+    if order != 'dense':
+        seg = rng.integers(0, 30, 500)
+        thr = rng.integers(0, 25, 500)
+        if order == 'by segment':
+            keep = np.argsort(seg, kind='stable')
+            seg, thr = seg[keep], thr[keep]
+        pairs = (seg, thr)
+    j_ref, g_ref = cost_and_gradient(pts, pos, f, 0.6, pairs)
+    j, g = cost_gradient(pts, pos, f, 0.6, pairs)
+    assert j == pytest.approx(j_ref, rel=1e-12)
+    np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-12 * np.abs(g_ref).max())
 
 
 @pytest.mark.parametrize('layout', ['spread', 'flat', 'one', 'line'])

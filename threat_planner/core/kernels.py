@@ -102,50 +102,64 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
             grad[s + 1, 1] += g * dy
             grad[s + 1, 2] += g * dz
     j_r = 0.0
-    for k in range(n_pairs):
-        if dense:
-            s = k // n_thr
-            i = k - s * n_thr
-        else:
-            s = seg[k]
-            i = thr[k]
+    # Runs of pairs on one segment (a segment's threats when dense): the gradients of its
+    # two ends are summed in registers and stored once per run, not six times per pair
+    # (each end's additions in the same order as pair by pair: the same bits; 40 segments
+    # x 20 threats 63-67 -> 52-58 us).
+    k = 0
+    while k < n_pairs:
+        s = k // n_thr if dense else seg[k]
+        end = k + n_thr
+        if not dense:
+            end = k + 1
+            while end < n_pairs and seg[end] == s:
+                end += 1
         ln = sd[s, 3]
         if ln == 0:
+            k = end
             continue
         ux, uy, uz, il = sd[s, 0], sd[s, 1], sd[s, 2], sd[s, 4]
-        ex = points[s, 0] - positions[i, 0]
-        ey = points[s, 1] - positions[i, 1]
-        ez = points[s, 2] - positions[i, 2]
-        t1 = ex * ux + ey * uy + ez * uz
-        t2 = t1 + ln
-        px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
-        h2 = px * px + py * py + pz * pz
-        h = math.sqrt(h2)
-        if h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE and t2 >= -CONTACT_DISTANCE:
-            return math.inf
-        ca, r2a, r3a = _split(t1, h, c2, c3)
-        cb, r2b, r3b = _split(t2, h, c2, c3)
-        dc = cb - ca
-        i2 = r2b - r2a
-        i3 = r3b - r3a
-        if dc != 0:
-            i2 += dc * (_PI / 4.0) / h ** 3
-            i3 += dc * (3.0 * _PI / 16.0) / h ** 5
-        fi = f[i]
-        j_r += fi * i2
-        da = t1 * t1 + h2
-        db = t2 * t2 + h2
-        phi_a = fi / (da * da)
-        phi_b = fi / (db * db)
-        m0 = 4.0 * fi * i3
-        coef_a = (phi_a - phi_b) * il - m0 * (1.0 + t1 * il)
-        coef_b = (phi_b - phi_a) * il + m0 * t1 * il
-        grad[s, 0] += w * (coef_a * px - phi_a * ux)
-        grad[s, 1] += w * (coef_a * py - phi_a * uy)
-        grad[s, 2] += w * (coef_a * pz - phi_a * uz)
-        grad[s + 1, 0] += w * (coef_b * px + phi_b * ux)
-        grad[s + 1, 1] += w * (coef_b * py + phi_b * uy)
-        grad[s + 1, 2] += w * (coef_b * pz + phi_b * uz)
+        x0, y0, z0 = points[s, 0], points[s, 1], points[s, 2]
+        gax, gay, gaz = grad[s, 0], grad[s, 1], grad[s, 2]
+        gbx, gby, gbz = grad[s + 1, 0], grad[s + 1, 1], grad[s + 1, 2]
+        for q in range(k, end):
+            i = q - k if dense else thr[q]
+            ex = x0 - positions[i, 0]
+            ey = y0 - positions[i, 1]
+            ez = z0 - positions[i, 2]
+            t1 = ex * ux + ey * uy + ez * uz
+            t2 = t1 + ln
+            px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
+            h2 = px * px + py * py + pz * pz
+            h = math.sqrt(h2)
+            if h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE and t2 >= -CONTACT_DISTANCE:
+                return math.inf
+            ca, r2a, r3a = _split(t1, h, c2, c3)
+            cb, r2b, r3b = _split(t2, h, c2, c3)
+            dc = cb - ca
+            i2 = r2b - r2a
+            i3 = r3b - r3a
+            if dc != 0:
+                i2 += dc * (_PI / 4.0) / h ** 3
+                i3 += dc * (3.0 * _PI / 16.0) / h ** 5
+            fi = f[i]
+            j_r += fi * i2
+            da = t1 * t1 + h2
+            db = t2 * t2 + h2
+            phi_a = fi / (da * da)
+            phi_b = fi / (db * db)
+            m0 = 4.0 * fi * i3
+            coef_a = (phi_a - phi_b) * il - m0 * (1.0 + t1 * il)
+            coef_b = (phi_b - phi_a) * il + m0 * t1 * il
+            gax += w * (coef_a * px - phi_a * ux)
+            gay += w * (coef_a * py - phi_a * uy)
+            gaz += w * (coef_a * pz - phi_a * uz)
+            gbx += w * (coef_b * px + phi_b * ux)
+            gby += w * (coef_b * py + phi_b * uy)
+            gbz += w * (coef_b * pz + phi_b * uz)
+        grad[s, 0], grad[s, 1], grad[s, 2] = gax, gay, gaz
+        grad[s + 1, 0], grad[s + 1, 1], grad[s + 1, 2] = gbx, gby, gbz
+        k = end
     return w * j_r + (1.0 - w) * j_l
 
 
