@@ -1,0 +1,147 @@
+"""Cost of one J-and-gradient evaluation at 40 segments x 20 threats, per pair.
+
+Usage (from the repository root)::
+
+    .venv/bin/python bench/profile_kernel.py [--base OTHER_CHECKOUT] [--out FILE]
+
+Times :func:`threat_planner.core.kernels._kernel` (the optimiser's hot path: 40-segment
+rounds at 20 threats are most of a plan's compiled time) called in a compiled loop, so
+that no dispatch overhead is counted, on a 40-segment path through ``uniform20_0``:
+
+* every pair (dense), the pairs listed by segment (as a cut-off gives them) and shuffled;
+* a floor: one square root and two arctangents per pair, the transcendental part of the
+  closed form that no rearrangement removes;
+* with ``--base``, the same rows for the kernel of another checkout (a fresh process),
+  interleaved with this one's so that the load of a shared machine hits both alike.
+
+Each process times the rows in rotation and keeps each row's least time (load only adds
+time); the report gives the median over ``--repeats`` processes per checkout. Writes
+``bench/results/profile_kernel.txt``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+import statistics
+import subprocess
+import sys
+
+import _repo  # noqa: F401  (puts the repository root on sys.path)
+
+ROOT = _repo.ROOT
+OUT = ROOT / 'bench' / 'results' / 'profile_kernel.txt'
+CALLS = 500
+#: Rotations through the rows in one process (the least time of each row kept).
+ROTATIONS = 9
+
+_TIMER = r'''
+import json, math, sys, time
+sys.path.insert(0, sys.argv[1])
+import numba
+import numpy as np
+from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3, _NO_PAIRS, _kernel
+from threat_planner.core.scenario import load_scenario
+from threat_planner.core.smoothing import resample
+
+sc = load_scenario(sys.argv[2])
+pos = np.ascontiguousarray(sc.threats.positions)
+f = np.ascontiguousarray(sc.threats.intensities)
+rng = np.random.default_rng(0)
+p = resample(np.vstack([sc.start, sc.goal]), 40) + rng.normal(0.0, 5.0, (41, 3))
+p[0], p[-1] = sc.start, sc.goal
+n_seg, n_thr = 40, len(pos)
+seg = np.repeat(np.arange(n_seg), n_thr)
+thr = np.tile(np.arange(n_thr), n_seg)
+mix = rng.permutation(len(seg))
+
+
+@numba.njit
+def loop(p, pos, f, seg, thr, c2, c3, g, n):
+    s = 0.0
+    for _ in range(n):
+        s += _kernel(p, pos, f, 0.5, seg, thr, c2, c3, g)
+    return s
+
+
+@numba.njit
+def floor(p, pos, n):
+    s = 0.0
+    for _ in range(n):
+        for a in range(p.shape[0] - 1):
+            for i in range(pos.shape[0]):
+                dx = p[a, 0] - pos[i, 0]
+                dy = p[a, 1] - pos[i, 1]
+                dz = p[a, 2] - pos[i, 2]
+                h = math.sqrt(dx * dx + dy * dy + dz * dz)
+                s += math.atan(dx / h) + math.atan(dy / h)
+    return s
+
+
+g = np.zeros((41, 3))
+rows = {
+    'dense': lambda n: loop(p, pos, f, _NO_PAIRS, _NO_PAIRS, _FROZEN_C2, _FROZEN_C3, g, n),
+    'pairs by segment': lambda n: loop(p, pos, f, seg, thr, _FROZEN_C2, _FROZEN_C3, g, n),
+    'pairs shuffled': lambda n: loop(p, pos, f, seg[mix].copy(), thr[mix].copy(),
+                                     _FROZEN_C2, _FROZEN_C3, g, n),
+    'floor: sqrt + 2 atan': lambda n: floor(p, pos, n),
+}
+for run in rows.values():
+    run(1)
+calls = int(sys.argv[3])
+out = {name: math.inf for name in rows}
+# Rows in rotation, the least time of each kept: bursts of load only ever add time.
+for _ in range(int(sys.argv[4])):
+    for name, run in rows.items():
+        t0 = time.perf_counter()
+        run(calls)
+        out[name] = min(out[name], 1e6 * (time.perf_counter() - t0) / calls)
+print(json.dumps(out))
+'''
+
+
+def _time(tree: Path, scenario: Path) -> dict[str, float]:
+    """One pass of every row in a fresh process importing ``tree``; us per evaluation."""
+    done = subprocess.run([sys.executable, '-c', _TIMER, str(tree), str(scenario),
+                           str(CALLS), str(ROTATIONS)], capture_output=True, text=True,
+                          check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    """Time the rows, interleaving the checkouts, and write the report."""
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--base', type=Path, help='another checkout to time beside this one')
+    ap.add_argument('--repeats', type=int, default=5)
+    ap.add_argument('--out', type=Path, default=OUT)
+    args = ap.parse_args()
+    scenario = ROOT / 'test' / 'data' / 'uniform20_0.yaml'
+    trees = {'this checkout': ROOT}
+    if args.base is not None:
+        trees['base ' + args.base.name] = args.base.resolve()
+    runs: dict[str, list[dict]] = {label: [] for label in trees}
+    for _ in range(args.repeats):
+        for label, tree in trees.items():
+            runs[label].append(_time(tree, scenario))
+    pairs = 40 * 20
+    lines = [f'# _kernel (J and gradient), 40 segments x 20 threats ({pairs} pairs), '
+             f'uniform20_0; {CALLS} calls in a compiled loop, the least of {ROTATIONS} '
+             f'rotations through the rows per process, median over {args.repeats} '
+             'processes per checkout (interleaved); machine shared with other engineers',
+             '',
+             f'{"checkout":24s} {"row":22s} {"us / evaluation":>16s} {"ns / pair":>10s} '
+             f'{"x floor":>8s}']
+    for label, passes in runs.items():
+        med = {row: statistics.median(p[row] for p in passes) for row in passes[0]}
+        floor = med['floor: sqrt + 2 atan']
+        for row, us in med.items():
+            lines.append(f'{label:24s} {row:22s} {us:16.1f} {1e3 * us / pairs:10.1f} '
+                         f'{us / floor:8.2f}')
+    text = '\n'.join(lines) + '\n'
+    args.out.write_text(text)
+    print(text, end='')
+
+
+if __name__ == '__main__':
+    main()
