@@ -9,9 +9,11 @@ One long-lived worker process per checkout (``PYTHONPATH`` = that checkout) plan
 bundled 20-threat scenarios at w = 0.2 / 0.5 / 0.8 with the default settings (the flight
 limits on) and with the limits off, and 1,000 / 10,000 threats of
 ``bench_tools.scale_problem`` at w 0.5; the two workers take turns on every case, after
-one untimed plan each to load the compiled kernels, so machine load falls on both alike.
-Every J is the checkout's own exact J of its own path; the table gives both and their
-ratio, the times and their ratio.
+one untimed plan each to load the compiled kernels, so machine load falls on both alike;
+``--repeats`` turns per case (default 5; the plans are deterministic, so the runs differ
+only by the machine's load), reported as the median and the least time of each. Every J
+is the checkout's own exact J of its own path; the table gives both and their ratio, the
+times and their ratios.
 """
 
 from __future__ import annotations
@@ -75,6 +77,15 @@ class Worker:
         self.proc.wait(timeout=60)
 
 
+def _summary(runs: list[dict]) -> dict:
+    """One cell from its repeated plans: median and least ms, J and feasibility."""
+    js = {r['J'] for r in runs}
+    # Deterministic plans: a J that moved between repeats would be a bug worth seeing.
+    assert len(js) == 1, f'J differs between repeats: {sorted(js)}'
+    return {'ms': statistics.median(r['ms'] for r in runs), 'min': min(r['ms'] for r in runs),
+            'J': runs[0]['J'], 'feasible': runs[0]['feasible']}
+
+
 def cases() -> list[dict]:
     """Every case, in run order."""
     out = []
@@ -95,6 +106,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('base', type=Path, help='the other checkout (the "before")')
     ap.add_argument('--out', type=Path, default=ROOT / 'bench' / 'results' / 'before_after.md')
+    ap.add_argument('--repeats', type=int, default=5, help='turns per case (default 5)')
     args = ap.parse_args()
     base_commit = subprocess.run(['git', '-C', str(args.base), 'rev-parse', '--short', 'HEAD'],
                                  capture_output=True, text=True).stdout.strip()
@@ -105,11 +117,16 @@ def main() -> None:
     before.plan(warm)
     after.plan(warm)
     rows = []
-    for i, case in enumerate(cases()):
-        # Alternate who goes first, so neither always plans on the warmer cache.
-        pair = (before, after) if i % 2 == 0 else (after, before)
-        got = {id(w): w.plan(case) for w in pair}
-        b, a = got[id(before)], got[id(after)]
+    turn = 0
+    for case in cases():
+        runs: dict[int, list[dict]] = {id(before): [], id(after): []}
+        for _ in range(max(args.repeats, 1)):
+            # Alternate who goes first, so neither always plans on the warmer cache.
+            pair = (before, after) if turn % 2 == 0 else (after, before)
+            turn += 1
+            for w in pair:
+                runs[id(w)].append(w.plan(case))
+        b, a = _summary(runs[id(before)]), _summary(runs[id(after)])
         rows.append((case, b, a))
         print(case['name'], case['limits_label'], f"{b['ms']:.0f} -> {a['ms']:.0f} ms",
               f"J {b['J']:.4f} -> {a['J']:.4f}", flush=True)
@@ -120,25 +137,30 @@ def main() -> None:
         '',
         f'Written by `bench/run_before_after.py` on {time.strftime("%Y-%m-%d %H:%M")}: '
         f'before = `{base_commit}`, after = `{head_commit}`, one worker process each, taking '
-        'turns on every case (one plan per cell, kernels loaded beforehand) on a 2-core '
-        'machine shared with other jobs: read the ratios.',
+        f'turns on every case ({args.repeats} plans per cell and checkout: ms = their median, '
+        'min = the least; kernels loaded beforehand) on a 2-core machine shared with other '
+        'jobs: read the ratios.',
         '',
-        '| case | limits | before ms | after ms | after/before time | before J | after J | '
-        'after/before J | feasible before/after |',
-        '|---|---|---:|---:|---:|---:|---:|---:|---|',
+        '| case | limits | before ms | after ms | after/before (median) | after/before (min) '
+        '| before J | after J | after/before J | feasible before/after |',
+        '|---|---|---:|---:|---:|---:|---:|---:|---:|---|',
     ]
     for case, b, a in rows:
-        lines.append(f"| {case['name']} | {case['limits_label']} | {b['ms']:.0f} | "
-                     f"{a['ms']:.0f} | {a['ms'] / b['ms']:.3f} | {b['J']:.4f} | "
-                     f"{a['J']:.4f} | {a['J'] / b['J']:.5f} | {b['feasible']}/{a['feasible']} |")
+        lines.append(f"| {case['name']} | {case['limits_label']} | {b['ms']:.1f} | "
+                     f"{a['ms']:.1f} | {a['ms'] / b['ms']:.3f} | {a['min'] / b['min']:.3f} | "
+                     f"{b['J']:.4f} | {a['J']:.4f} | {a['J'] / b['J']:.5f} | "
+                     f"{b['feasible']}/{a['feasible']} |")
     lines.append('')
     for label in ('on', 'off'):
         sel = [(b, a) for c, b, a in rows if c['limits_label'] == label and 'file' in c]
         lines.append(
-            f'* 20 threats, limits {label} ({len(sel)} cases): median time '
-            f"{statistics.median(b['ms'] for b, _ in sel):.0f} -> "
-            f"{statistics.median(a['ms'] for _, a in sel):.0f} ms, worst "
-            f"{max(b['ms'] for b, _ in sel):.0f} -> {max(a['ms'] for _, a in sel):.0f} ms; "
+            f'* 20 threats, limits {label} ({len(sel)} cases): per-case medians: median '
+            f"{statistics.median(b['ms'] for b, _ in sel):.1f} -> "
+            f"{statistics.median(a['ms'] for _, a in sel):.1f} ms, worst "
+            f"{max(b['ms'] for b, _ in sel):.1f} -> {max(a['ms'] for _, a in sel):.1f} ms; "
+            f"per-case least: median {statistics.median(b['min'] for b, _ in sel):.1f} -> "
+            f"{statistics.median(a['min'] for _, a in sel):.1f} ms, worst "
+            f"{max(b['min'] for b, _ in sel):.1f} -> {max(a['min'] for _, a in sel):.1f} ms; "
             f"J after/before median {statistics.median(a['J'] / b['J'] for b, a in sel):.5f}, "
             f"best {min(a['J'] / b['J'] for b, a in sel):.5f}, "
             f"worst {max(a['J'] / b['J'] for b, a in sel):.5f}")
