@@ -66,3 +66,57 @@ def test_threat_pushes_the_chain_away():
     # Stiffer springs straighten the chain: less deflection at larger k.
     stiff = smooth(line, threat, f, k=3000, damping=20, mass=1, q=500)
     assert np.min(np.linalg.norm(stiff.points - threat, axis=1)) < after
+
+
+def _reference_smooth(points, positions, intensities, k, damping, mass, q, steps, bounds):
+    """The integration as it ran in numpy before it was compiled: ``steps`` steps, no stop."""
+    x = np.array(points, float)
+    v = np.zeros_like(x)
+    n = len(x) - 1
+    dt = 0.5 * np.sqrt(mass / k)
+    drag = 2.0 * mass * 2.0 * np.sqrt(k / mass) * np.sin(np.pi / (2 * n))
+    spacing = max(float(np.linalg.norm(x[-1] - x[0])) / n,
+                  float(np.linalg.norm(np.diff(x, axis=0), axis=1).mean()), 1e-9)
+    for _ in range(steps):
+        f = chain_forces(x, v, positions, intensities, k, damping, q, 0.0) - drag * v
+        v[1:-1] += dt * f[1:-1] / mass
+        move = dt * v
+        size = np.linalg.norm(move, axis=1)
+        big = size > 0.25 * spacing
+        move[big] *= (0.25 * spacing / size[big])[:, None]
+        v[big] = move[big] / dt
+        x[1:-1] += move[1:-1]
+        if bounds is not None:
+            clipped = np.clip(x, bounds[0], bounds[1])
+            v[clipped != x] = 0.0
+            x = clipped
+    return x
+
+
+@pytest.mark.parametrize('walls', [False, True])
+def test_compiled_forces_and_steps_are_the_numpy_chain(walls):
+    # The compiled integration (chain_kernels) against chain_forces and the numpy step:
+    # the same to rounding (numpy's power and einsum round some results differently).
+    from threat_planner.core.chain_kernels import _forces
+    rng = np.random.default_rng(4)
+    for trial in range(20):
+        n, m = int(rng.integers(4, 30)), int(rng.integers(0, 25))
+        x = rng.uniform(0, 100, (n + 1, 3))
+        v = rng.normal(0, 2, (n + 1, 3))
+        pos, f = rng.uniform(0, 100, (m, 3)), rng.uniform(1e3, 1e5, m)
+        if m:
+            pos[0] = x[2]                     # a mass on a threat feels no push from it
+        got = np.empty_like(x)
+        _forces(x, v, pos.reshape(-1, 3), f, 2.0, 0.7, 1.5, 0.3, got)
+        ref = chain_forces(x, v, pos, f, 2.0, 0.7, 1.5, 0.3)
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+        # 200 steps either way (max_steps, tolerance 0: the stopping rule never fires).
+        chain = np.linspace([0.0, 0.0, 50.0], [100.0, 100.0, 50.0], n + 1)
+        chain[1:-1] += rng.normal(0, 4, (n - 1, 3))
+        bounds = (np.zeros(3), np.full(3, 100.0)) if walls else None
+        r = smooth(chain, pos, f, k=3.0, damping=1.0, mass=1.0, q=1.0, max_steps=200,
+                   tolerance=0.0, bounds=bounds)
+        assert r.steps == 200 and not r.converged
+        ref = _reference_smooth(chain, pos, f, 3.0, 1.0, 1.0, 1.0, 200, bounds)
+        np.testing.assert_allclose(r.points, ref, rtol=0, atol=1e-7)
+        assert np.array_equal(r.points[[0, -1]], chain[[0, -1]])

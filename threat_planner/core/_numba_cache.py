@@ -16,7 +16,7 @@ from pathlib import Path
 
 #: The modules compiled with ``cache=True`` and the ones whose constants they compile in.
 SOURCES = ('cost.py', 'kernels.py', 'lbfgs.py', 'limit_kernels.py', 'near_kernels.py',
-           'graph_kernels.py', 'lagrangian_kernels.py', 'limits.py')
+           'graph_kernels.py', 'lagrangian_kernels.py', 'limits.py', 'chain_kernels.py')
 
 
 def cache_dir() -> Path:

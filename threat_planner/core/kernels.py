@@ -291,41 +291,6 @@ def _kernel_split(points, positions, f, w, seg, thr, c2, c3, grad):
     return total
 
 
-@njit(cache=True)
-def _resample(points, n_segments, out):
-    """Points at equal arc-length steps along a polyline into out (n+1, 3), ends kept."""
-    m = points.shape[0]
-    cum = np.zeros(m)
-    for k in range(1, m):
-        d = points[k] - points[k - 1]
-        cum[k] = cum[k - 1] + math.sqrt(d @ d)
-    total = cum[m - 1]
-    j = 0
-    for q in range(n_segments + 1):
-        arc = total * q / n_segments
-        # The last segment that starts at or before arc (zero-length ones passed over).
-        while j < m - 2 and cum[j + 1] <= arc:
-            j += 1
-        span = cum[j + 1] - cum[j]
-        a = (arc - cum[j]) / span if span > 0 else 0.0
-        a = min(max(a, 0.0), 1.0)
-        out[q] = points[j] + a * (points[j + 1] - points[j])
-    out[0] = points[0]
-    out[n_segments] = points[m - 1]
-
-
-def resample(points: NDArray, n_segments: int) -> NDArray:
-    """Points at equal arc-length steps along a polyline (n+1, 3), ends kept, compiled."""
-    points = np.ascontiguousarray(points, float)
-    out = np.empty((n_segments + 1, 3))
-    if len(points) == 1 or n_segments < 1:
-        out[:] = points[0]
-        out[-1] = points[-1]
-        return out
-    _resample(points, int(n_segments), out)
-    return out
-
-
 _NO_PAIRS = np.zeros(0, np.int64)
 
 

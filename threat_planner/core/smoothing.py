@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from threat_planner.core import kernels
+from threat_planner.core import chain_kernels
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,7 @@ def resample(points: NDArray, n_segments: int) -> NDArray:
         Array (n+1, 3) [m].
     """
     # Compiled: the optimiser's levels and the screening resample ~40 times a plan.
-    return kernels.resample(points, n_segments)
+    return chain_kernels.resample(points, n_segments)
 
 
 def pitch_angles(points: NDArray) -> NDArray:
@@ -175,7 +175,6 @@ def smooth(points: NDArray, positions: NDArray, intensities: NDArray, k: float,
         The SmoothingResult.
     """
     x = np.array(points, float)
-    v = np.zeros_like(x)
     if len(x) < 3:
         return SmoothingResult(x, 0, True)
     n = len(x) - 1
@@ -184,28 +183,8 @@ def smooth(points: NDArray, positions: NDArray, intensities: NDArray, k: float,
     drag = 2.0 * mass * 2.0 * np.sqrt(k / mass) * np.sin(np.pi / (2 * n))
     spacing = float(np.linalg.norm(x[-1] - x[0])) / n
     spacing = max(spacing, float(np.linalg.norm(np.diff(x, axis=0), axis=1).mean()), 1e-9)
-    max_move = 0.25 * spacing
-    calm = 0
-    for step in range(1, max_steps + 1):
-        f = chain_forces(x, v, positions, intensities, k, damping, q, rest_length) - drag * v
-        v[1:-1] += dt * f[1:-1] / mass
-        move = dt * v
-        size = np.linalg.norm(move, axis=1)
-        too_big = size > max_move
-        if np.any(too_big):
-            move[too_big] *= (max_move / size[too_big])[:, None]
-            v[too_big] = move[too_big] / dt
-        before = x.copy()
-        x[1:-1] += move[1:-1]
-        if bounds is not None:
-            # Walls, not a clip at the end: a chain pushed out and clipped afterwards can
-            # land on a threat sitting on the boundary.
-            clipped = np.clip(x, bounds[0], bounds[1])
-            v[clipped != x] = 0.0
-            x = clipped
-        # The move that happened: a mass pressed against a wall is at rest.
-        moved = float(np.max(np.abs(x - before)))
-        calm = calm + 1 if moved < tolerance * spacing else 0
-        if calm >= 10:
-            return SmoothingResult(x, step, True)
-    return SmoothingResult(x, max_steps, False)
+    # Compiled (chain_kernels): every step in one call, the forces as chain_forces'.
+    x, steps, converged = chain_kernels.integrate(
+        x, positions, intensities, k, damping, mass, q, rest_length, dt, drag,
+        0.25 * spacing, tolerance * spacing, max_steps, bounds)
+    return SmoothingResult(x, steps, converged)
