@@ -1,0 +1,110 @@
+"""The paper's own methods (``paper``, ``improved``) at 20 threats, side by side with a base.
+
+Usage (from the repository root)::
+
+    .venv/bin/python bench/run_paper_methods.py [--base OTHER_CHECKOUT] [--repeats 3]
+
+Plans every bundled 20-threat scenario at w = 0.2 / 0.5 / 0.8 with ``method`` ``paper``
+(length Dijkstra, nearest entry and exit, fixed k, the mass-spring chain) and ``improved``
+(J-weighted Dijkstra, candidate entries and exits, the k sweep), defaults otherwise, in a
+fresh process per checkout and pass, the checkouts taking turns; one untimed plan per
+method first loads the compiled kernels. Reports each checkout's median and worst of the
+per-case medians and the J ratio of this checkout to the base. Writes
+``bench/results/paper_methods.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+import statistics
+import subprocess
+import sys
+import time
+
+import _repo  # noqa: F401  (puts the repository root on sys.path)
+
+ROOT = _repo.ROOT
+OUT = ROOT / 'bench' / 'results' / 'paper_methods.md'
+SCENARIOS = ['uniform20_0', 'uniform20_1', 'weak20_0', 'strongweak_0', 'clustered_0',
+             'ground_0', 'coplanar_0']
+WS = (0.2, 0.5, 0.8)
+METHODS = ('paper', 'improved')
+
+_PASS = r'''
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+from threat_planner.core.planner import plan, PlannerConfig
+from threat_planner.core.scenario import load_scenario
+cases = [(name, w, load_scenario(f'{sys.argv[2]}/{name}.yaml'))
+         for name in sys.argv[3].split(',') for w in (0.2, 0.5, 0.8)]
+out = {}
+for method in ('paper', 'improved'):
+    sc = cases[0][2]
+    plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(method=method))
+    for name, w, sc in cases:
+        t0 = time.perf_counter()
+        r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=w, method=method))
+        out[f'{method}:{name}@{w}'] = (1e3 * (time.perf_counter() - t0), r.cost.J)
+print(json.dumps(out))
+'''
+
+
+def _pass(tree: Path) -> dict[str, list[float]]:
+    """One pass of every case in a fresh process importing ``tree``: {case: [ms, J]}."""
+    done = subprocess.run([sys.executable, '-c', _PASS, str(tree), str(ROOT / 'test' / 'data'),
+                           ','.join(SCENARIOS)], capture_output=True, text=True, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _commit(tree: Path) -> str:
+    return subprocess.run(['git', '-C', str(tree), 'rev-parse', '--short', 'HEAD'],
+                          capture_output=True, text=True).stdout.strip()
+
+
+def main() -> None:
+    """Run the passes, alternating the checkouts, and write the table."""
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--base', type=Path, help='another checkout to time beside this one')
+    ap.add_argument('--repeats', type=int, default=3)
+    ap.add_argument('--out', type=Path, default=OUT)
+    args = ap.parse_args()
+    trees = [('this checkout', ROOT)]
+    if args.base is not None:
+        trees.insert(0, ('base', args.base.resolve()))
+    runs: dict[str, list[dict]] = {label: [] for label, _ in trees}
+    for i in range(max(args.repeats, 1)):
+        for label, tree in (trees if i % 2 == 0 else trees[::-1]):
+            runs[label].append(_pass(tree))
+    lines = ['# `paper` and `improved` at 20 threats', '',
+             f'Written by `bench/run_paper_methods.py` on {time.strftime("%Y-%m-%d %H:%M")}: '
+             + ', '.join(f'{label} = `{_commit(tree)}`' for label, tree in trees)
+             + f'; {len(SCENARIOS)} bundled scenarios x w {WS}, defaults otherwise; '
+             f'{args.repeats} passes per checkout in fresh processes, taking turns; ms = the '
+             'median of each case over the passes (kernels loaded beforehand); a 2-core '
+             'machine shared with other jobs.', '',
+             '| method | checkout | median ms | worst ms | worst case |',
+             '|---|---|---:|---:|---|']
+    for method in METHODS:
+        for label, _ in trees:
+            per = {case: statistics.median(p[case][0] for p in runs[label])
+                   for case in runs[label][0] if case.startswith(method + ':')}
+            worst = max(per, key=per.get)
+            lines.append(f'| {method} | {label} | {statistics.median(per.values()):.1f} | '
+                         f'{per[worst]:.1f} | {worst.split(":", 1)[1]} |')
+    if args.base is not None:
+        lines.append('')
+        for method in METHODS:
+            ratio = [runs['this checkout'][0][c][1] / runs['base'][0][c][1]
+                     for c in runs['base'][0] if c.startswith(method + ':')]
+            lines.append(f'* {method}: J this checkout / base over {len(ratio)} cases: '
+                         f'median {statistics.median(ratio):.9f}, least {min(ratio):.9f}, '
+                         f'most {max(ratio):.9f}')
+    text = '\n'.join(lines) + '\n'
+    args.out.write_text(text)
+    print(text, end='')
+
+
+if __name__ == '__main__':
+    main()
