@@ -119,7 +119,7 @@ def quality_rows(cold: list[dict]) -> list[dict]:
 
 
 def _verdict(value: float, target: float) -> str:
-    return f'{"met" if value <= target else "MISSED"} ({value:.0f} vs <= {target:g} ms)'
+    return f'{"met" if value <= target else "MISSED"} ({value:.1f} vs <= {target:g} ms)'
 
 
 def write_markdown(cold: list[dict], scale: list[dict], quality: list[dict],
