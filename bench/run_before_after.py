@@ -27,6 +27,8 @@ import subprocess
 import sys
 import time
 
+from _repo import short_commit
+
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIOS = ['uniform20_0', 'uniform20_1', 'weak20_0', 'strongweak_0', 'clustered_0',
              'ground_0', 'coplanar_0']
@@ -108,10 +110,7 @@ def main() -> None:
     ap.add_argument('--out', type=Path, default=ROOT / 'bench' / 'results' / 'before_after.md')
     ap.add_argument('--repeats', type=int, default=5, help='turns per case (default 5)')
     args = ap.parse_args()
-    base_commit = subprocess.run(['git', '-C', str(args.base), 'rev-parse', '--short', 'HEAD'],
-                                 capture_output=True, text=True).stdout.strip()
-    head_commit = subprocess.run(['git', '-C', str(ROOT), 'rev-parse', '--short', 'HEAD'],
-                                 capture_output=True, text=True).stdout.strip()
+    base_commit, head_commit = short_commit(args.base), short_commit(ROOT)
     before, after = Worker(args.base), Worker(ROOT)
     warm = cases()[0]
     before.plan(warm)

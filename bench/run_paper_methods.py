@@ -58,11 +58,6 @@ def _pass(tree: Path) -> dict[str, list[float]]:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def _commit(tree: Path) -> str:
-    return subprocess.run(['git', '-C', str(tree), 'rev-parse', '--short', 'HEAD'],
-                          capture_output=True, text=True).stdout.strip()
-
-
 def main() -> None:
     """Run the passes, alternating the checkouts, and write the table."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -79,7 +74,7 @@ def main() -> None:
             runs[label].append(_pass(tree))
     lines = ['# `paper` and `improved` at 20 threats', '',
              f'Written by `bench/run_paper_methods.py` on {time.strftime("%Y-%m-%d %H:%M")}: '
-             + ', '.join(f'{label} = `{_commit(tree)}`' for label, tree in trees)
+             + ', '.join(f'{label} = `{_repo.short_commit(tree)}`' for label, tree in trees)
              + f'; {len(SCENARIOS)} bundled scenarios x w {WS}, defaults otherwise; '
              f'{args.repeats} passes per checkout in fresh processes, taking turns; ms = the '
              'median of each case over the passes (kernels loaded beforehand); a 2-core '

@@ -114,10 +114,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         before = _run(args.base.resolve(), Path(tmp) / 'before.json')
         after = _run(ROOT, Path(tmp) / 'after.json')
-    rev = {}
-    for label, tree in (('before', args.base), ('after', ROOT)):
-        rev[label] = subprocess.run(['git', '-C', str(tree), 'rev-parse', '--short', 'HEAD'],
-                                    capture_output=True, text=True).stdout.strip()
+    # Here, not at the top: a worker must import the checkout its PYTHONPATH names, and
+    # _repo puts this repository first on sys.path.
+    from _repo import short_commit
+    rev = {'before': short_commit(args.base), 'after': short_commit(ROOT)}
     lines = ['# Random fields, before and after', '',
              f'Written by `bench/run_random_fields.py`: before = `{rev["before"]}`, after = '
              f'`{rev["after"]}`, one plan per cell on a shared 2-core machine (read the J '

@@ -58,12 +58,10 @@ def _forces(x, v, positions, f, k, b, q, rest_length, out):
             d2 = rx * rx + ry * ry + rz * rz
             # d^5 as d2^2 sqrt(d2): a pow a pair cost half the integration.
             d5 = d2 * d2 * math.sqrt(d2)
-            # numpy's nan_to_num(posinf=0) of Q F / d^5: a mass on a threat (or so near
-            # that d^5 underflows) feels no push from it.
-            mag = q * f[i] / d5 if d5 > 0 else math.nan
-            if mag == -math.inf:
-                mag = -1.7976931348623157e308
-            elif not math.isfinite(mag):
+            # numpy's nan_to_num(posinf=0) of Q F / d^5 (Q >= 0, F > 0): a mass on a threat,
+            # or so near that d^5 underflows or the push overflows, feels none from it.
+            mag = q * f[i] / d5 if d5 > 0 else 0.0
+            if mag == math.inf:
                 mag = 0.0
             ax += mag * rx
             ay += mag * ry
