@@ -9,8 +9,8 @@ integration is one call, the arithmetic of the numpy version
 the last bit: d^5 is d2^2 sqrt(d2) (a ``pow`` a pair was half the integration's time) and
 sums run in loop order (numpy's ``einsum`` orders some differently). Tests check the forces
 against chain_forces to 1e-12 and 200 steps against the numpy integration to 1e-7 m.
-Measured on the 21 bundled cases (``paper`` / ``improved``): median 61 -> 4.6 ms and
-3.85 -> 0.15 s a plan, the same J to 9 digits on ``paper``.
+On the 21 bundled cases (``bench/results/paper_methods.md``) the median plan went 53.8 ->
+4.2 ms (``paper``, the same J to 9 digits) and 3.2 s -> 113 ms (``improved``).
 """
 
 from __future__ import annotations
