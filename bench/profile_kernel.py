@@ -22,13 +22,10 @@ time); the report gives the median over ``--repeats`` processes per checkout. Wr
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 import statistics
-import subprocess
-import sys
 
-import _repo  # noqa: F401  (puts the repository root on sys.path)
+import _repo  # puts the repository root on sys.path first
 
 ROOT = _repo.ROOT
 OUT = ROOT / 'bench' / 'results' / 'profile_kernel.txt'
@@ -101,14 +98,6 @@ print(json.dumps(out))
 '''
 
 
-def _time(tree: Path, scenario: Path) -> dict[str, float]:
-    """One pass of every row in a fresh process importing ``tree``; us per evaluation."""
-    done = subprocess.run([sys.executable, '-c', _TIMER, str(tree), str(scenario),
-                           str(CALLS), str(ROTATIONS)], capture_output=True, text=True,
-                          check=True)
-    return json.loads(done.stdout.strip().splitlines()[-1])
-
-
 def main() -> None:
     """Time the rows, interleaving the checkouts, and write the report."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -117,13 +106,12 @@ def main() -> None:
     ap.add_argument('--out', type=Path, default=OUT)
     args = ap.parse_args()
     scenario = ROOT / 'test' / 'data' / 'uniform20_0.yaml'
-    trees = {'this checkout': ROOT}
+    trees = [('this checkout', ROOT)]
     if args.base is not None:
-        trees['base ' + args.base.name] = args.base.resolve()
-    runs: dict[str, list[dict]] = {label: [] for label in trees}
-    for _ in range(args.repeats):
-        for label, tree in trees.items():
-            runs[label].append(_time(tree, scenario))
+        trees.append(('base ' + args.base.name, args.base.resolve()))
+    # One pass of every row in a fresh process importing the checkout: us per evaluation.
+    runs = _repo.interleaved(trees, args.repeats, lambda tree: _repo.fresh_json(
+        _TIMER, tree, scenario, CALLS, ROTATIONS))
     pairs = 40 * 20
     lines = [f'# _kernel (J and gradient), 40 segments x 20 threats ({pairs} pairs), '
              f'uniform20_0; {CALLS} calls in a compiled loop, the least of {ROTATIONS} '

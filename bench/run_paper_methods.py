@@ -16,14 +16,11 @@ per-case medians and the J ratio of this checkout to the base. Writes
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 import statistics
-import subprocess
-import sys
 import time
 
-import _repo  # noqa: F401  (puts the repository root on sys.path)
+import _repo  # puts the repository root on sys.path first
 
 ROOT = _repo.ROOT
 OUT = ROOT / 'bench' / 'results' / 'paper_methods.md'
@@ -51,13 +48,6 @@ print(json.dumps(out))
 '''
 
 
-def _pass(tree: Path) -> dict[str, list[float]]:
-    """One pass of every case in a fresh process importing ``tree``: {case: [ms, J]}."""
-    done = subprocess.run([sys.executable, '-c', _PASS, str(tree), str(ROOT / 'test' / 'data'),
-                           ','.join(SCENARIOS)], capture_output=True, text=True, check=True)
-    return json.loads(done.stdout.strip().splitlines()[-1])
-
-
 def main() -> None:
     """Run the passes, alternating the checkouts, and write the table."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -68,10 +58,9 @@ def main() -> None:
     trees = [('this checkout', ROOT)]
     if args.base is not None:
         trees.insert(0, ('base', args.base.resolve()))
-    runs: dict[str, list[dict]] = {label: [] for label, _ in trees}
-    for i in range(max(args.repeats, 1)):
-        for label, tree in (trees if i % 2 == 0 else trees[::-1]):
-            runs[label].append(_pass(tree))
+    # One pass of every case in a fresh process importing the checkout: {case: [ms, J]}.
+    runs = _repo.interleaved(trees, args.repeats, lambda tree: _repo.fresh_json(
+        _PASS, tree, ROOT / 'test' / 'data', ','.join(SCENARIOS)))
     lines = ['# `paper` and `improved` at 20 threats', '',
              f'Written by `bench/run_paper_methods.py` on {time.strftime("%Y-%m-%d %H:%M")}: '
              + ', '.join(f'{label} = `{_repo.short_commit(tree)}`' for label, tree in trees)

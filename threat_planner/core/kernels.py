@@ -105,8 +105,8 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
     # Runs of pairs on one segment (a segment's threats when dense): the gradients of its
     # two ends are summed in registers and stored once per run, not six times per pair
     # (each end's additions in the same order as pair by pair: the same bits). Dense, 40
-    # segments x 20 threats: 45.1 -> 38.5 us; a cut-off's pairs (sorted by segment) as
-    # fast as before (bench/results/profile_kernel.txt).
+    # segments x 20 threats: 9-15 % faster over two runs; a cut-off's pairs (sorted by
+    # segment) within 2 % of before (bench/results/profile_kernel.txt).
     k = 0
     while k < n_pairs:
         s = k // n_thr if dense else seg[k]
