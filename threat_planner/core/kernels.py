@@ -73,6 +73,26 @@ def _split(t, h, c2, c3):
             (0.375 * at + 0.375 * r * q + 0.25 * r * q * q) / hn ** 5)
 
 
+@njit(cache=True, inline='always')
+def _foot(ax, ay, az, ux, uy, uz, ln, positions, i):
+    """Threat i against the segment of length ln [m] from (ax, ay, az) along unit u.
+
+    Returns ``(t1, t2, px, py, pz, h2, h, hit)``: the segment's ends along its line from
+    the foot of the perpendicular, the threat-to-line offset p, |p|^2 and |p|, and whether
+    the segment passes within CONTACT_DISTANCE of the threat.
+    """
+    ex = ax - positions[i, 0]
+    ey = ay - positions[i, 1]
+    ez = az - positions[i, 2]
+    t1 = ex * ux + ey * uy + ez * uz
+    t2 = t1 + ln
+    px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
+    h2 = px * px + py * py + pz * pz
+    h = math.sqrt(h2)
+    hit = h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE and t2 >= -CONTACT_DISTANCE
+    return t1, t2, px, py, pz, h2, h, hit
+
+
 @njit(cache=True)
 def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
     """J and its gradient (into grad) over the given pairs; seg[0] < 0 means all pairs."""
@@ -125,15 +145,8 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
         gbx, gby, gbz = grad[s + 1, 0], grad[s + 1, 1], grad[s + 1, 2]
         for q in range(k, end):
             i = q - k if dense else thr[q]
-            ex = x0 - positions[i, 0]
-            ey = y0 - positions[i, 1]
-            ez = z0 - positions[i, 2]
-            t1 = ex * ux + ey * uy + ez * uz
-            t2 = t1 + ln
-            px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
-            h2 = px * px + py * py + pz * pz
-            h = math.sqrt(h2)
-            if h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE and t2 >= -CONTACT_DISTANCE:
+            t1, t2, px, py, pz, h2, h, hit = _foot(x0, y0, z0, ux, uy, uz, ln, positions, i)
+            if hit:
                 return math.inf
             ca, r2a, r3a = _split(t1, h, c2, c3)
             cb, r2b, r3b = _split(t2, h, c2, c3)
@@ -188,14 +201,8 @@ def _pair_integral(a, b, s, positions, i, c2, c3):
 @njit(cache=True, inline='always')
 def _along(ax, ay, az, ux, uy, uz, ln, positions, i, c2, c3):
     """Integral of ds / d^4 from threat i along ln [m] from (ax, ay, az) in direction u."""
-    ex = ax - positions[i, 0]
-    ey = ay - positions[i, 1]
-    ez = az - positions[i, 2]
-    t1 = ex * ux + ey * uy + ez * uz
-    t2 = t1 + ln
-    px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
-    h = math.sqrt(px * px + py * py + pz * pz)
-    if h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE and t2 >= -CONTACT_DISTANCE:
+    t1, t2, _, _, _, _, h, hit = _foot(ax, ay, az, ux, uy, uz, ln, positions, i)
+    if hit:
         return math.inf
     ca, r2a, _ = _split(t1, h, c2, c3)
     cb, r2b, _ = _split(t2, h, c2, c3)
