@@ -5,6 +5,7 @@ Imported for its side effect by every script under ``bench/`` (they run as
 and the helpers of the reports that compare two checkouts.
 """
 
+import argparse
 import json
 from pathlib import Path
 import subprocess
@@ -40,3 +41,20 @@ def interleaved(trees: list[tuple[str, Path]], repeats: int,
         for label, tree in (trees if i % 2 == 0 else trees[::-1]):
             runs[label].append(run(tree))
     return runs
+
+
+def comparison_args(description: str, repeats: int, out: Path
+                    ) -> tuple[argparse.Namespace, list[tuple[str, Path]]]:
+    """Parse ``--base``, ``--repeats``, ``--out``; the args and ``[(label, checkout)]``.
+
+    The checkouts are ``('base', BASE)`` (when given) then ``('this checkout', ROOT)``.
+    """
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument('--base', type=Path, help='another checkout to time beside this one')
+    ap.add_argument('--repeats', type=int, default=repeats, help=f'passes (default {repeats})')
+    ap.add_argument('--out', type=Path, default=out)
+    args = ap.parse_args()
+    trees = [('this checkout', ROOT)]
+    if args.base is not None:
+        trees.insert(0, ('base', args.base.resolve()))
+    return args, trees

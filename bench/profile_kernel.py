@@ -21,8 +21,6 @@ time); the report gives the median over ``--repeats`` processes per checkout. Wr
 
 from __future__ import annotations
 
-import argparse
-from pathlib import Path
 import statistics
 
 import _repo  # puts the repository root on sys.path first
@@ -100,15 +98,8 @@ print(json.dumps(out))
 
 def main() -> None:
     """Time the rows, interleaving the checkouts, and write the report."""
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--base', type=Path, help='another checkout to time beside this one')
-    ap.add_argument('--repeats', type=int, default=5)
-    ap.add_argument('--out', type=Path, default=OUT)
-    args = ap.parse_args()
+    args, trees = _repo.comparison_args(__doc__.split('\n')[0], 5, OUT)
     scenario = ROOT / 'test' / 'data' / 'uniform20_0.yaml'
-    trees = [('this checkout', ROOT)]
-    if args.base is not None:
-        trees.append(('base ' + args.base.name, args.base.resolve()))
     # One pass of every row in a fresh process importing the checkout: us per evaluation.
     runs = _repo.interleaved(trees, args.repeats, lambda tree: _repo.fresh_json(
         _TIMER, tree, scenario, CALLS, ROTATIONS))
@@ -117,6 +108,7 @@ def main() -> None:
              f'uniform20_0; {CALLS} calls in a compiled loop, the least of {ROTATIONS} '
              f'rotations through the rows per process, median over {args.repeats} '
              'processes per checkout (interleaved); machine shared with other engineers',
+             '; '.join(f'{label} = `{_repo.short_commit(tree)}`' for label, tree in trees),
              '',
              f'{"checkout":24s} {"row":22s} {"us / evaluation":>16s} {"ns / pair":>10s} '
              f'{"x floor":>8s}']

@@ -15,8 +15,6 @@ per-case medians and the J ratio of this checkout to the base. Writes
 
 from __future__ import annotations
 
-import argparse
-from pathlib import Path
 import statistics
 import time
 
@@ -50,14 +48,7 @@ print(json.dumps(out))
 
 def main() -> None:
     """Run the passes, alternating the checkouts, and write the table."""
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--base', type=Path, help='another checkout to time beside this one')
-    ap.add_argument('--repeats', type=int, default=3)
-    ap.add_argument('--out', type=Path, default=OUT)
-    args = ap.parse_args()
-    trees = [('this checkout', ROOT)]
-    if args.base is not None:
-        trees.insert(0, ('base', args.base.resolve()))
+    args, trees = _repo.comparison_args(__doc__.split('\n')[0], 3, OUT)
     # One pass of every case in a fresh process importing the checkout: {case: [ms, J]}.
     runs = _repo.interleaved(trees, args.repeats, lambda tree: _repo.fresh_json(
         _PASS, tree, ROOT / 'test' / 'data', ','.join(SCENARIOS)))
