@@ -12,7 +12,7 @@ hits every row alike:
 * **Delaunay**: ``scipy.spatial.Delaunay(points)`` on the 10,000 threat positions, in this
   process, after the points are in memory (the bare triangulation the planner cannot skip);
 * **plan, YAML**: ``python -m threat_planner.cli plan scale10000.yaml`` as a fresh process
-  (interpreter start, imports, libyaml loading, validation, ``plan``, printing);
+  (interpreter start, imports, YAML loading, validation, ``plan``, printing);
 * **plan, threats_file .npy / .csv**: the same scenario with its threats in a compact file
   next to the YAML (scenario key ``threats_file``), written to a temporary folder.
 

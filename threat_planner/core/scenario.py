@@ -32,6 +32,7 @@ from threat_planner.core.airspace import Airspace
 from threat_planner.errors import InputError, ScenarioError
 from threat_planner.core.planner import check_endpoints
 from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.yaml_threats import load_document
 
 
 @dataclass(frozen=True)
@@ -252,8 +253,7 @@ def load_scenario(path: str | Path) -> Scenario:
     except OSError as exc:
         raise ScenarioError(f'{path}: cannot read ({exc.strerror})') from None
     try:
-        # libyaml's C loader when built in: 10,000 threats load in a fraction of the time.
-        data = yaml.load(text, Loader=getattr(yaml, 'CSafeLoader', yaml.SafeLoader))
+        data = load_document(text)
     except (yaml.YAMLError, ValueError, RecursionError) as exc:
         mark = getattr(exc, 'problem_mark', None)
         where = f' at line {mark.line + 1}' if mark else ''
