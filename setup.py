@@ -43,7 +43,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'threat-planner = threat_planner.cli:main',
+            'threat-planner = threat_planner.cli.main:console',
             'planner_node = threat_planner.ros.node:main',
             'planner_lifecycle_node = threat_planner.ros.lifecycle:main',
             'threat_publisher = threat_planner.ros.publisher:main',

@@ -83,3 +83,38 @@ def test_no_arguments_print_usage_and_subcommands_and_exit_2():
     assert proc.stderr.startswith('usage: threat-planner')
     for command in ('plan', 'paper', 'replay'):
         assert command in proc.stderr
+
+
+def _console(prelude: str, *args) -> subprocess.CompletedProcess:
+    """Run the script's entry point after ``prelude`` in a fresh interpreter."""
+    code = (f'import sys\n{prelude}\nsys.argv = ["threat-planner", *{list(map(str, args))!r}]\n'
+            'from threat_planner.cli.main import console\nconsole()\n')
+    return subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_the_script_runs_exit_functions_and_flushes_before_it_skips_teardown(tmp_path):
+    out = tmp_path / 'plan.json'
+    p = _console('import atexit\natexit.register(print, "exit functions ran")',
+                 'plan', DATA / 'uniform20_0.yaml', '--json', out)
+    assert p.returncode == 0, p.stderr
+    assert 'final:' in p.stdout and p.stdout.rstrip().endswith('exit functions ran')
+    assert json.loads(out.read_text())['method'] == 'best'
+    bad = _console('', 'plan', DATA / 'uniform20_0.yaml', '--n-points', '0')
+    assert bad.returncode == 2 and bad.stderr.count('\n') == 1
+
+
+def test_the_script_waits_for_a_running_thread_like_a_normal_exit():
+    prelude = ('import threading, time\n'
+               'threading.Thread(target=lambda: (time.sleep(1), print("thread done"))).start()')
+    p = _console(prelude, 'plan', DATA / 'uniform20_0.yaml', '--method', 'paper')
+    assert p.returncode == 0, p.stderr
+    assert 'thread done' in p.stdout
+
+
+def test_output_into_a_closed_pipe_is_no_traceback():
+    script = subprocess.Popen([sys.executable, '-m', 'threat_planner.cli', 'plan',
+                               str(DATA / 'uniform20_0.yaml')], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE)
+    script.stdout.close()
+    assert script.wait(timeout=300) == 1 and b'Traceback' not in script.stderr.read()

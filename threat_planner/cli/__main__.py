@@ -1,5 +1,5 @@
-import sys
+"""``python -m threat_planner.cli``: the ``threat-planner`` script."""
 
-from threat_planner.cli import main
+from threat_planner.cli.main import console
 
-sys.exit(main())
+console()
