@@ -196,3 +196,49 @@ def test_a_shortcut_refine_that_ends_infeasible_is_redone_the_long_way(monkeypat
     calls.clear()
     best._refine(None, start, [], 'x', False)
     assert calls == [False]
+
+
+def _rules_problem(name, **limits):
+    from threat_planner.core.limits import FlightLimits
+    sc = load_scenario(DATA / f'{name}.yaml')
+    lim = FlightLimits(**{'max_climb_deg': 30.0, 'max_dive_deg': 30.0,
+                          'min_turn_radius_m': 10.0, **limits})
+    return SimpleNamespace(threats=sc.threats, box=sc.box, limits=lim)
+
+
+def test_crowded_fields_without_limits_count_every_threat_and_others_keep_cut_offs():
+    from threat_planner.core.best import _counts_far_threats, _optimiser_cutoff
+    off = {'max_climb_deg': 90.0, 'max_dive_deg': 90.0, 'min_turn_radius_m': 0.0}
+    crowded_off = _rules_problem('big300_0', **off)
+    assert _counts_far_threats(crowded_off)
+    assert _optimiser_cutoff(40, crowded_off) is None          # 12,000 pairs, all counted
+    assert _optimiser_cutoff(80, crowded_off) is not None      # 24,000: too many
+    crowded_on = _rules_problem('big300_0')
+    assert not _counts_far_threats(crowded_on)
+    assert _optimiser_cutoff(40, crowded_on) == pytest.approx(
+        3.0 * crowded_on.threats.typical_spacing(crowded_on.box))
+    sparse_off = _rules_problem('uniform20_0', **off)
+    assert not is_crowded(sparse_off.threats, sparse_off.box)
+    assert not _counts_far_threats(sparse_off)
+
+
+def test_surface_routes_cost_the_lattice_exactly_up_to_the_pairs_allowed(monkeypatch):
+    import threat_planner.core.seeds as seeds
+    sc = load_scenario(DATA / 'big300_0.yaml')
+    radii = []
+    real = seeds.segment_costs
+
+    def spy(a, b, threats, radius):
+        radii.append(radius)
+        return real(a, b, threats, radius)
+    monkeypatch.setattr(seeds, 'segment_costs', spy)
+    exact = seeds.surface_routes(sc.threats, sc.start, sc.goal, sc.box, 0.5,
+                                 dense_pairs=500_000)
+    cut = seeds.surface_routes(sc.threats, sc.start, sc.goal, sc.box, 0.5)
+    assert radii[0] is None and radii[1] == pytest.approx(
+        seeds.CUTOFF_SPACINGS * sc.threats.typical_spacing(sc.box))
+    # Each is the least-J route of its own lattice costs: the exact one's J is no higher.
+    from threat_planner.core.cost import path_cost
+    j = [path_cost(r[0], sc.threats.positions, sc.threats.intensities, 0.5).J
+         for r in (exact, cut)]
+    assert j[0] <= j[1] * (1 + 1e-12)

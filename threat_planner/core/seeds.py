@@ -29,7 +29,8 @@ SURFACE_DIVISIONS = 8
 SURFACE_ROUTES = 2
 #: Lattice points the start and the goal are joined to.
 TERMINAL_LEGS = 6
-#: (edge, threat) pairs costed exactly before the lattice switches to the cut-off.
+#: (edge, threat) pairs costed exactly before the lattice switches to the cut-off (by
+#: default; the caller may allow more).
 DENSE_PAIRS = 100_000
 #: Cut-off radius of the lattice's edge costs, in typical threat spacings.
 CUTOFF_SPACINGS = 2.0
@@ -83,8 +84,8 @@ def _unit_lattice(divisions: int) -> tuple[NDArray, NDArray]:
 
 
 def surface_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: float,
-                   divisions: int = SURFACE_DIVISIONS,
-                   count: int = SURFACE_ROUTES) -> list[NDArray]:
+                   divisions: int = SURFACE_DIVISIONS, count: int = SURFACE_ROUTES,
+                   dense_pairs: int | None = None) -> list[NDArray]:
     """Least-J routes from s to t over the box's surface lattice, as polylines in the box.
 
     Args:
@@ -95,6 +96,7 @@ def surface_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: fl
         w: Threat weight of J.
         divisions: Intervals per box edge of the lattice.
         count: Most routes returned.
+        dense_pairs: Most (edge, threat) pairs costed exactly (default DENSE_PAIRS).
 
     Returns:
         Distinct polylines ``[s, lattice points..., t]`` (each (m, 3) [m]), best first.
@@ -105,7 +107,7 @@ def surface_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: fl
     legs = [np.atleast_1d(np.argsort(np.linalg.norm(points - p, axis=1))[:k]) for p in (s, t)]
     a = np.concatenate([points[edges[:, 0]], np.repeat(s[None], k, 0), points[legs[1]]])
     b = np.concatenate([points[edges[:, 1]], points[legs[0]], np.repeat(t[None], k, 0)])
-    radius = None if len(a) * len(threats) <= DENSE_PAIRS \
+    radius = None if len(a) * len(threats) <= (dense_pairs or DENSE_PAIRS) \
         else CUTOFF_SPACINGS * threats.typical_spacing(box)
     threat, _ = segment_costs(a, b, threats, radius)
     lengths = np.linalg.norm(b - a, axis=1)
