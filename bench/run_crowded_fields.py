@@ -1,0 +1,141 @@
+"""``best`` on fresh crowded fields against the bench's in-box yardstick, beside a base.
+
+Usage (from the repository root)::
+
+    .venv/bin/python bench/run_crowded_fields.py [--base OTHER_CHECKOUT] [--repeats 2]
+
+The shared big300_0 is one crowded field; tuning on it alone would tune to a file. Here six
+fields are drawn like it (seeds 1-6): 300 threats uniform in [50, 950]^3 m of a 1 km box,
+F uniform in [1e9, 4e9], start (0, 0, 500) and goal (1000, 1000, 500); w = 0.2 / 0.5 / 0.8.
+Each case's yardstick is :func:`yardstick.in_box_yardstick` on a 31^3 grid (no flight
+limits, inside the box; about a minute a case), computed once and cached with its path in
+``bench/results/crowded_yardstick.json`` (``--rebuild`` recomputes; the stored J is checked
+against ``path_cost`` of the stored path, and the path against the box). ``best`` plans
+with the limits off (the yardstick's rules) and with the defaults, in a fresh process per
+checkout and pass, the checkouts taking turns; ms = the least of the passes. Writes
+``bench/results/crowded_fields.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import sys
+import time
+
+import _repo  # puts the repository root on sys.path first
+import numpy as np
+
+ROOT = _repo.ROOT
+OUT = ROOT / 'bench' / 'results' / 'crowded_fields.md'
+CACHE = ROOT / 'bench' / 'results' / 'crowded_yardstick.json'
+SEEDS = range(1, 7)
+WS = (0.2, 0.5, 0.8)
+GRID = 31
+
+_FIELD = r'''
+def field(seed):
+    import numpy as np
+    from threat_planner.core.threats import Box, ThreatField
+    rng = np.random.default_rng([seed, 300, 77])
+    positions = rng.uniform(50.0, 950.0, (300, 3))
+    intensities = rng.uniform(1e9, 4e9, 300)
+    return (ThreatField.from_arrays(positions, intensities), np.array([0.0, 0.0, 500.0]),
+            np.array([1000.0, 1000.0, 500.0]), Box.from_corners([0.0] * 3, [1000.0] * 3))
+'''
+
+_PASS = r'''
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+from threat_planner.core.planner import plan, PlannerConfig
+''' + _FIELD + r'''
+OFF = {'max_climb_deg': 90.0, 'max_dive_deg': 90.0, 'min_turn_radius_m': 0.0}
+out = {}
+for seed in map(int, sys.argv[2].split(',')):
+    threats, s, t, box = field(seed)
+    for w in (0.2, 0.5, 0.8):
+        for rules, extra in (('off', OFF), ('on', {})):
+            cfg = PlannerConfig(w=w, **extra)
+            if not out:
+                plan(threats, s, t, box, cfg)   # loads the compiled kernels
+            t0 = time.perf_counter()
+            r = plan(threats, s, t, box, cfg)
+            out[f'{rules}:{seed}@{w}'] = (1e3 * (time.perf_counter() - t0), r.cost.J,
+                                          bool(r.feasible))
+print(json.dumps(out))
+'''
+
+
+def _yardsticks(rebuild: bool) -> dict:
+    """The cached yardstick of every case, computed where missing (or all: rebuild)."""
+    import yardstick
+    from threat_planner.core.cost import path_cost
+    scope: dict = {}
+    exec(_FIELD, scope)
+    cache = {} if rebuild or not CACHE.exists() else json.loads(CACHE.read_text())
+    for seed in SEEDS:
+        threats, s, t, box = scope['field'](seed)
+        for w in WS:
+            key = f'{seed}@{w}'
+            if key not in cache:
+                print(f'yardstick {key} ...', file=sys.stderr, flush=True)
+                ys = yardstick.in_box_yardstick(threats, s, t, box, w, grid=GRID)
+                cache[key] = {'J': ys['J'], 'how': ys['how'], 'seconds': ys['seconds'],
+                              'path': np.asarray(ys['path']).tolist()}
+                CACHE.write_text(json.dumps(cache))
+            path = np.array(cache[key]['path'])
+            tol = 1e-6 * box.diagonal
+            assert np.all(path >= box.lo - tol) and np.all(path <= box.hi + tol), key
+            j = path_cost(path, threats.positions, threats.intensities, w).J
+            assert abs(j / cache[key]['J'] - 1.0) < 1e-9, (key, j, cache[key]['J'])
+    return cache
+
+
+def main() -> None:
+    """Build or read the yardsticks, run the passes and write the table."""
+    argv = [a for a in sys.argv[1:] if a != '--rebuild']
+    rebuild = len(argv) != len(sys.argv) - 1
+    sys.argv[1:] = argv
+    args, trees = _repo.comparison_args(__doc__.split('\n')[0], 2, OUT)
+    yard = _yardsticks(rebuild)
+    runs = _repo.interleaved(trees, args.repeats, lambda tree: _repo.fresh_json(
+        _PASS, tree, ','.join(map(str, SEEDS))))
+    labels = [label for label, _ in trees]
+    lines = ['# `best` on crowded fields (300 threats, 1 km box)', '',
+             f'Written by `bench/run_crowded_fields.py` on {time.strftime("%Y-%m-%d %H:%M")}: '
+             + ', '.join(f'{label} = `{_repo.short_commit(tree)}`' for label, tree in trees)
+             + f'; {args.repeats} passes per checkout in fresh processes, taking turns; ms = '
+             'the least of the passes; a 2-core machine shared with other jobs. Fields and '
+             'yardstick: see the script. Ratios are J / the in-box yardstick (limits off, '
+             f'{GRID}^3 grid); the limits-on rows (45/60 deg defaults) are held to more than '
+             'the yardstick, so their ratios say how much the limits cost, not a gap.', '',
+             '| case | yardstick J | ' + ' | '.join(
+                 f'{lab}: off | {lab}: off ms | {lab}: on | {lab}: on ms' for lab in labels)
+             + ' |', '|---|---:|' + '---:|' * 4 * len(labels)]
+    summary = {}
+    for seed in SEEDS:
+        for w in WS:
+            key = f'{seed}@{w}'
+            row = f'| {key} | {yard[key]["J"]:.2f} |'
+            for lab in labels:
+                for rules in ('off', 'on'):
+                    cell = [p[f'{rules}:{key}'] for p in runs[lab]]
+                    ratio = cell[0][1] / yard[key]['J'] if cell[0][2] else float('inf')
+                    ms = min(c[0] for c in cell)
+                    summary.setdefault((lab, rules), []).append((ratio, ms))
+                    row += f' {ratio:.4f} | {ms:.0f} |'
+            lines.append(row)
+    lines += ['', '| checkout | rules | median ratio | worst ratio | median ms |',
+              '|---|---|---:|---:|---:|']
+    for (lab, rules), vals in summary.items():
+        ratios = [v[0] for v in vals]
+        lines.append(f'| {lab} | limits {rules} | {statistics.median(ratios):.4f} | '
+                     f'{max(ratios):.4f} | {statistics.median(v[1] for v in vals):.0f} |')
+    lines += ['', 'Target (issue 11, limits off): median <= 1.002, worst <= 1.02.']
+    text = '\n'.join(lines) + '\n'
+    args.out.write_text(text)
+    print(text, end='')
+
+
+if __name__ == '__main__':
+    main()
