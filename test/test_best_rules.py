@@ -242,3 +242,23 @@ def test_surface_routes_cost_the_lattice_exactly_up_to_the_pairs_allowed(monkeyp
     j = [path_cost(r[0], sc.threats.positions, sc.threats.intensities, 0.5).J
          for r in (exact, cut)]
     assert j[0] <= j[1] * (1 + 1e-12)
+
+
+def test_a_candidate_stalled_short_of_a_limit_gets_rounds_again_and_wins(monkeypatch):
+    # A crowded field (bench/run_crowded_fields.py, seed 6) where the rounds on the best
+    # basin stopped at a 32.6 deg climb against 30 deg and a basin 51 % higher won.
+    import threat_planner.core.best as best
+    from threat_planner.core.planner import plan, PlannerConfig
+    from threat_planner.core.threats import ThreatField
+    rng = np.random.default_rng([6, 300, 77])
+    threats = ThreatField.from_arrays(rng.uniform(50.0, 950.0, (300, 3)),
+                                      rng.uniform(1e9, 4e9, 300))
+    box = Box.from_corners([0.0] * 3, [1000.0] * 3)
+    s, t = np.array([0.0, 0.0, 500.0]), np.array([1000.0, 1000.0, 500.0])
+    cfg = PlannerConfig(w=0.8)
+    rescued = plan(threats, s, t, box, cfg)
+    monkeypatch.setattr(best, '_rescue', lambda p, b, refined: b)
+    plain = plan(threats, s, t, box, cfg)
+    assert rescued.feasible and plain.feasible
+    assert rescued.seed.endswith('rounds again')
+    assert rescued.cost.J < 0.75 * plain.cost.J
