@@ -6,7 +6,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from threat_planner.core.best import _lead, _refined_margin, _runner_up_lead, RUNNER_UP_MARGIN
+from threat_planner.core.basins import (basin_lead as _lead, refined_margin as _refined_margin,
+                                        runner_up_lead as _runner_up_lead, RUNNER_UP_MARGIN)
 from threat_planner.core.optimisation import is_crowded
 from threat_planner.core.scenario import load_scenario
 from threat_planner.core.threats import Box
@@ -79,7 +80,7 @@ def test_a_runner_up_is_finished_only_if_it_may_win():
 
 def test_the_runner_up_gate_compares_level_by_level_and_records_its_verdict():
     """A level best has no answer for goes on; a clearly worse one stops with its lead."""
-    from threat_planner.core.best import _runner_up_gate
+    from threat_planner.core.basins import runner_up_gate as _runner_up_gate
 
     class Costs(SimpleNamespace):
         def cost(self, points):

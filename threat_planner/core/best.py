@@ -15,6 +15,8 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from threat_planner.core.basins import (basin_lead, COARSE_SEGMENTS, refined_margin,
+                                        runner_up_gate, same_basin)
 from threat_planner.core.limits import check_limits, FlightLimits
 from threat_planner.core.optimisation import is_crowded, minimise_cost
 from threat_planner.core.problem import Candidate, Problem, smooth_route
@@ -25,8 +27,8 @@ from threat_planner.core.threats import Box
 
 __all__ = ['plan_best', 'refine', 'repair']
 
-#: Segments and stopping tolerance of the coarse screening minimisation.
-COARSE_SEGMENTS = 8
+#: Segments (where basins are told apart too) and stopping tolerance of the coarse
+#: screening minimisation.
 COARSE_TOLERANCE = 1e-4
 #: L-BFGS iterations and augmented Lagrangian rounds of the slope-held screening (a
 #: ranking: measured against 200 and 6 on the 21 bundled cases, 15 % less time, final J
@@ -48,10 +50,8 @@ OPTIMISER_CUTOFF_SPACINGS = 3.0
 FEASIBILITY_TRIES = 3
 #: Basins refined when the limits bind (the best feasible one kept).
 BOUND_BASINS = 2
-#: A runner-up basin this much above the best at a coarse level is not refined further
-#: (on the 21 bundled cases, at the coarsest level 12 of 16 runners-up were in the winner's
-#: basin and 2 were 22 % and 124 % above it; 2 were refined to the end).
-RUNNER_UP_MARGIN = 0.01
+#: Most rounds-again runs on a candidate that stalled short of a limit (:func:`_rescue`).
+RESCUE_TRIES = 3
 #: Bisection steps of the last-resort repair towards the straight line.
 REPAIR_BISECTIONS = 20
 
@@ -138,7 +138,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     # Lead of the best basin over the next distinct one (routes that screened into the
     # same basin end within 1 % of the diagonal of each other): the warm-start rule.
     # (Surface routes have their own point counts: compare at the coarse resolution.)
-    margin = _lead(p, [(j, path) for j, _, _, path in screened])
+    margin = basin_lead(p, [(j, path) for j, _, _, path in screened])
     order = [(name, seq, coarse, False) for _, name, seq, coarse in screened]
     held_margin = 0.0
     # In a crowded field 8 segments through threats whose reach exceeds their spacing
@@ -165,7 +165,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
             # (measured: most runners-up were in the winner's basin from the coarsest).
             verdict: list[float] = []
             cand = _refine(p, start, seq or routes[0], name, broken,
-                           gate=_runner_up_gate(p, best.levels, verdict))
+                           gate=runner_up_gate(p, best.levels, verdict))
             if verdict:
                 runner_lead = verdict[0]
                 break
@@ -189,7 +189,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     elif runner_lead is not None and best.limit_check.feasible:
         best.basin_margin = max(min(held_margin, runner_lead), 0.0)
     else:
-        best.basin_margin = _refined_margin(p, best, refined, held_margin)
+        best.basin_margin = refined_margin(p, best, refined, held_margin)
     if not best.limit_check.feasible:
         best = repair(p, best)
     p.clock.lap('optimisation_ms')
@@ -215,98 +215,36 @@ def _rescue(p: Problem, best: Candidate, refined: list[Candidate]) -> Candidate:
 
     The rounds can stall just short of a limit: on a crowded field a 30 deg climb ended
     at 32.6 deg (J 36,436) and a basin 51 % higher won. Rounds again from where it
-    stopped, with a fresh penalty, met the climb at J 36,451. Tried on the infeasible
-    candidates below best's J, least J first, until one succeeds.
+    stopped, with a fresh penalty, met the climb at J 36,451; on another the violation
+    went 3.3 -> 1.1 deg -> met (J 24,002 against 31,800). Tried on the infeasible
+    candidates below best's J, least J first, until one succeeds: up to RESCUE_TRIES
+    times each while the worst violation falls.
     """
     stalled = sorted((c for c in refined if not _usable(c) and np.isfinite(c.cost.J)
                       and len(c.final) == p.config.n_points + 1), key=lambda c: c.cost.J)
     for cand in stalled:
         if _usable(best) and cand.cost.J >= best.cost.J:
             break
-        again = refine(p, cand.final, cand.seq, f'{cand.seed}, rounds again', warm=True)
+        again, worst = cand, _worst_violation(cand)
+        for _ in range(RESCUE_TRIES):
+            again = refine(p, again.final, cand.seq, f'{cand.seed}, rounds again', warm=True)
+            if _usable(again) or _worst_violation(again) >= worst:
+                break
+            worst = _worst_violation(again)
         if _usable(again) and (not _usable(best) or again.cost.J < best.cost.J):
             again.limits_bound, again.levels = True, cand.levels
             return again
     return best
 
 
+def _worst_violation(c: Candidate) -> float:
+    """Return the largest amount by which a candidate breaks a limit [deg or m]."""
+    return max(c.limit_check.violations.values(), default=0.0)
+
+
 def _usable(c: Candidate) -> bool:
     """Whether a candidate meets the limits with a finite J (not through a threat)."""
     return bool(c.limit_check.feasible and np.isfinite(c.cost.J))
-
-
-def _lead(p: Problem, ranked: list[tuple[float, NDArray]]) -> float:
-    """Relative J lead of the first of ``ranked`` (J, path) over the next distinct basin.
-
-    Paths that end within 1 % of the box diagonal of the first are the same basin; paths
-    are compared at the coarse resolution (surface routes have their own point counts).
-    No distinct runner-up: an infinite lead.
-    """
-    j0, first = ranked[0]
-    for j_other, other in ranked[1:]:
-        if not _same_basin(p, first, other):
-            return j_other / j0 - 1.0 if j0 > 0 else 0.0
-    return float('inf')
-
-
-def _runner_up_gate(p: Problem, answers: tuple, verdict: list) -> Callable[[NDArray], bool]:
-    """Return the refine gate of a runner-up against best's answers level by level.
-
-    It stops the runner-up at a level (its warm-start lead appended to ``verdict``) as
-    soon as :func:`_runner_up_lead` tells, against best's answer at the same level.
-    """
-    mine = {len(a): a for a in answers}
-
-    def gate(points: NDArray) -> bool:
-        lead = None if len(points) not in mine else _runner_up_lead(
-            p, mine[len(points)], points, p.check(points).feasible)
-        if lead is not None:
-            verdict.append(lead)
-        return lead is not None
-    return gate
-
-
-def _runner_up_lead(p: Problem, mine: NDArray, theirs: NDArray, feasible: bool
-                    ) -> float | None:
-    """Decide on a runner-up at a coarse level: None to refine it further.
-
-    ``mine`` is best's answer and ``theirs`` the runner-up's at the same level. Otherwise
-    the warm-start lead it leaves best: 0 when it is in best's basin there or breaks the
-    limits (no distinct feasible rival known, as :func:`_refined_margin`), else its
-    relative J excess when that is more than RUNNER_UP_MARGIN.
-    """
-    if _same_basin(p, mine, theirs) or not feasible:
-        return 0.0
-    j_best, j_part = p.cost(mine).J, p.cost(theirs).J
-    if j_part > (1.0 + RUNNER_UP_MARGIN) * j_best:
-        return j_part / j_best - 1.0
-    return None
-
-
-def _same_basin(p: Problem, a: NDArray, b: NDArray, resampled: bool = False) -> bool:
-    """Whether two paths lie within 1 % of the box diagonal (compared at 8 segments).
-
-    ``resampled``: both are already resampled to COARSE_SEGMENTS.
-    """
-    gap = a - b if resampled else resample(a, COARSE_SEGMENTS) - resample(b, COARSE_SEGMENTS)
-    return float(np.max(np.einsum('ij,ij->i', gap, gap))) <= (0.01 * p.box.diagonal) ** 2
-
-
-def _refined_margin(p: Problem, best: Candidate, refined: list[Candidate],
-                    held_margin: float) -> float:
-    """Return the warm-start lead of best where the limits bound: 0 unless it is feasible.
-
-    The lead under the slope limits of the screening (``held_margin``), and no more than
-    the lead over the next distinct basin refined under all the limits: none refined, no
-    lead (measured: where the refined starts all ended in one basin, a cold replan after
-    a 0.5 % move found another 2.4 % lower on uniform20_0 at w = 0.5).
-    """
-    if not best.limit_check.feasible or best.cost.J <= 0:
-        return 0.0
-    others = [(c.cost.J, c.final) for c in refined
-              if c is not best and c.limit_check.feasible]
-    lead = _lead(p, [(best.cost.J, best.final)] + sorted(others, key=lambda o: o[0]))
-    return max(min(held_margin, lead), 0.0) if np.isfinite(lead) else 0.0
 
 
 def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: float | None,
@@ -334,7 +272,7 @@ def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: flo
     todo = []
     for j_box, name, seq, coarse in screened:
         key = resample(coarse, COARSE_SEGMENTS)
-        if not any(_same_basin(p, key, k, resampled=True) for k in kept):
+        if not any(same_basin(p, key, k, resampled=True) for k in kept):
             kept.append(key)
             todo.append((name in optimal, j_box, name, seq, key))
     todo.sort(key=lambda item: item[0])
@@ -354,7 +292,7 @@ def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: flo
         held.append((not ok, j, f'{name} (slopes held)', seq, res.points, res.constrained))
     held.sort(key=lambda item: item[:2])
     feasible = [(item[1], item[4]) for item in held if not item[0]]
-    lead = _lead(p, feasible) if feasible else 0.0
+    lead = basin_lead(p, feasible) if feasible else 0.0
     if feasible and skipped and feasible[0][0] > 0:
         # A left-out seed may be the next distinct basin: its J bounds the lead.
         lead = min(lead, min(skipped) / feasible[0][0] - 1.0)
