@@ -96,3 +96,22 @@ def test_the_kernel_cache_is_named_by_every_compiled_module():
     assert compiled and compiled <= set(_numba_cache.SOURCES)
     assert numba.config.CACHE_DIR == str(_numba_cache.cache_dir())
     assert _numba_cache.cache_dir().name != ''
+
+
+@pytest.mark.parametrize('first, env, sees', [('', '', False), ('import coverage', '', True),
+                                              ('', '1', True)])
+def test_numba_imports_coverage_only_for_a_running_measurement(first, env, sees):
+    import os
+    import subprocess
+    import sys
+    pytest.importorskip('coverage')
+    code = (f'{first}\nimport sys, threat_planner.core\n'
+            'import numba.misc.coverage_support as c\n'
+            'print(c.coverage_available, "coverage" in sys.modules)\n'
+            'import coverage\nprint(coverage.Coverage is not None)\n')
+    environment = {k: v for k, v in os.environ.items() if k != 'NUMBA_JIT_COVERAGE'}
+    if env:
+        environment['NUMBA_JIT_COVERAGE'] = env
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         env=environment, timeout=120, check=True).stdout.split()
+    assert out == [str(sees), str(sees), 'True']

@@ -7,6 +7,13 @@ One module per stage of the paper: :mod:`.threats` (§3.1), :mod:`.cost` (eq. 15
 reads scenario files. Nothing here imports rclpy or a message package (a test checks).
 """
 
+from threat_planner.core import _numba_cache
+
+try:
+    _numba_cache.import_numba()  # before any kernel module does (see import_numba)
+except ImportError:  # pragma: no cover - numba is in install_requires
+    pass
+
 from threat_planner.core.config import PlannerConfig
 from threat_planner.core.cost import Cost, path_cost
 from threat_planner.core.planner import check_endpoints, plan
