@@ -16,7 +16,8 @@ hits every row alike:
 * **plan, threats_file .npy / .csv**: the same scenario with its threats in a compact file
   next to the YAML (scenario key ``threats_file``), written to a temporary folder.
 
-For every command: median wall time, the planner's own ``time:`` line (so the rest is
+The package is byte-compiled first, as pip and colcon install it. For every command:
+median wall time, the planner's own ``time:`` line (so the rest is
 start-up and loading), peak RSS of the child (``wait4``), and ratio to the Delaunay median.
 Writes ``bench/results/cli_scale.{md,json}``.
 """
@@ -24,6 +25,7 @@ Writes ``bench/results/cli_scale.{md,json}``.
 from __future__ import annotations
 
 import argparse
+import compileall
 import datetime as dt
 import json
 import os
@@ -158,7 +160,9 @@ def markdown(summary: list[dict], meta: dict, parts: dict) -> str:
              f"{meta['load']}), so read the ratios (measured interleaved in one run), not the "
              'absolute times.', '',
              f"Scenario `{SCENARIO.name}` (10,000 threats); options `{meta['extra'] or '-'}`; "
-             f"median of {meta['repeats']} runs. Every `plan` row is a fresh process: "
+             f"median of {meta['repeats']} runs; the package byte-compiled first, as pip and "
+             'colcon install it (this machine sets PYTHONDONTWRITEBYTECODE=1). Every `plan` '
+             'row is a fresh process: '
              'interpreter start, imports, loading and validation, `plan()`, printing. '
              '`plan ms` is the planner\'s own `time:` line; `rest` = wall - plan (start-up, '
              'imports, loading). Delaunay = bare `scipy.spatial.Delaunay` of the same points, '
@@ -203,6 +207,10 @@ def main(argv: list[str] | None = None) -> int:
                        f'Python {platform.python_version()}',
             'load': ', '.join(f'{x:.1f}' for x in os.getloadavg()),
             'repeats': args.repeats, 'extra': ' '.join(args.extra)}
+    # Installed as users install it (pip and colcon byte-compile the package): this machine
+    # sets PYTHONDONTWRITEBYTECODE=1, so every fresh process would compile the checkout's
+    # modules from source (measured: 86 ms of wall time a start).
+    meta['bytecode'] = compileall.compile_dir(str(_repo.ROOT / 'threat_planner'), quiet=1)
     raw = measure(args.repeats, args.extra)
     summary = summarise(raw['rows'])
     args.out.mkdir(parents=True, exist_ok=True)
