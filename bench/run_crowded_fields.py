@@ -107,7 +107,8 @@ def main() -> None:
              + f'; {args.repeats} passes per checkout in fresh processes, taking turns; ms = '
              'the least of the passes; a 2-core machine shared with other jobs. Fields and '
              'yardstick: see the script. Ratios are J / the in-box yardstick (limits off, '
-             f'{GRID}^3 grid); the limits-on rows (45/60 deg defaults) are held to more than '
+             f'{GRID}^3 grid); the limits-on rows (the defaults: climb and dive 30 deg, turn '
+             'radius 10 m) are held to more than '
              'the yardstick, so their ratios say how much the limits cost, not a gap.', '',
              '| case | yardstick J | ' + ' | '.join(
                  f'{lab}: off | {lab}: off ms | {lab}: on | {lab}: on ms' for lab in labels)

@@ -27,8 +27,8 @@ from threat_planner.core.threats import Box
 
 __all__ = ['plan_best', 'refine', 'repair']
 
-#: Segments (where basins are told apart too) and stopping tolerance of the coarse
-#: screening minimisation.
+#: Stopping tolerance of the coarse screening minimisation (its segments, at which basins
+#: are told apart too: basins.COARSE_SEGMENTS).
 COARSE_TOLERANCE = 1e-4
 #: L-BFGS iterations and augmented Lagrangian rounds of the slope-held screening (a
 #: ranking: measured against 200 and 6 on the 21 bundled cases, 15 % less time, final J
@@ -99,8 +99,9 @@ def _counts_far_threats(p: Problem) -> bool:
 
     Where the reaches exceed the spacing the far threats are a large share of J_R, and
     cut-offs mislead the refinement and the surface routes. Under the limits, counting
-    them was measured too (18 random 300-threat fields, 45/60 deg defaults): 1.7x the
-    time (447 -> 774 ms) with J from -40 % to +2 % either way, so they keep the cut-offs.
+    them was measured too (18 random 300-threat fields, the default limits: climb and
+    dive 30 deg, turn radius 10 m): 1.7x the time (447 -> 774 ms) with J from -40 % to
+    +2 % either way, so they keep the cut-offs.
     """
     return is_crowded(p.threats, p.box) and not p.limits.any_constraint
 
