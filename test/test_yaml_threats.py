@@ -117,3 +117,10 @@ def test_a_threats_header_inside_a_quoted_string_is_not_taken_for_the_key():
             'threats: []\n')
     assert _fast(text) == _pyyaml(text)
     assert yaml.safe_load(text)['threats'] == []
+
+
+@pytest.mark.parametrize('encode', [lambda t: t.encode(), lambda t: b'\xef\xbb\xbf' + t.encode(),
+                                    lambda t: t.encode('utf-16')])
+def test_bytes_with_or_without_a_byte_order_mark_read_as_pyyaml_reads_them(encode):
+    data = encode((DATA / 'uniform20_0.yaml').read_text())
+    assert repr(yaml_threats.load_document(data)) == repr(yaml.load(data, Loader=LOADER))
