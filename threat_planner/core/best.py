@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from threat_planner.core.basins import (basin_lead, COARSE_SEGMENTS, refined_margin,
                                         runner_up_gate, same_basin)
-from threat_planner.core.limits import check_limits, FlightLimits
+from threat_planner.core.limits import check_limits, FlightLimits, relative_excess
 from threat_planner.core.optimisation import is_crowded, minimise_cost
 from threat_planner.core.problem import Candidate, Problem, smooth_route
 from threat_planner.core.search import alternative_routes, nearest_nodes, segment_costs
@@ -226,21 +226,21 @@ def _rescue(p: Problem, best: Candidate, refined: list[Candidate]) -> Candidate:
     for cand in stalled:
         if _usable(best) and cand.cost.J >= best.cost.J:
             break
-        again, worst = cand, _worst_violation(cand)
+        again, worst = cand, _worst_violation(p, cand)
         for _ in range(RESCUE_TRIES):
             again = refine(p, again.final, cand.seq, f'{cand.seed}, rounds again', warm=True)
-            if _usable(again) or _worst_violation(again) >= worst:
+            if _usable(again) or _worst_violation(p, again) >= worst:
                 break
-            worst = _worst_violation(again)
+            worst = _worst_violation(p, again)
         if _usable(again) and (not _usable(best) or again.cost.J < best.cost.J):
             again.limits_bound, again.levels = True, cand.levels
             return again
     return best
 
 
-def _worst_violation(c: Candidate) -> float:
-    """Return the largest amount by which a candidate breaks a limit [deg or m]."""
-    return max(c.limit_check.violations.values(), default=0.0)
+def _worst_violation(p: Problem, c: Candidate) -> float:
+    """Return the largest amount by which a candidate breaks a limit, over that limit."""
+    return max(relative_excess(c.limit_check.violations, p.limits).values(), default=0.0)
 
 
 def _usable(c: Candidate) -> bool:
