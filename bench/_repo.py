@@ -43,13 +43,17 @@ def interleaved(trees: list[tuple[str, Path]], repeats: int,
     return runs
 
 
-def comparison_args(description: str, repeats: int, out: Path
+def comparison_args(description: str, repeats: int, out: Path,
+                    more: Callable[[argparse.ArgumentParser], None] | None = None
                     ) -> tuple[argparse.Namespace, list[tuple[str, Path]]]:
     """Parse ``--base``, ``--repeats``, ``--out``; the args and ``[(label, checkout)]``.
 
     The checkouts are ``('base', BASE)`` (when given) then ``('this checkout', ROOT)``.
+    ``more`` adds a script's own options to the parser.
     """
     ap = argparse.ArgumentParser(description=description)
+    if more is not None:
+        more(ap)
     ap.add_argument('--base', type=Path, help='another checkout to time beside this one')
     ap.add_argument('--repeats', type=int, default=repeats, help=f'passes (default {repeats})')
     ap.add_argument('--out', type=Path, default=out)

@@ -93,11 +93,10 @@ def _yardsticks(rebuild: bool) -> dict:
 
 def main() -> None:
     """Build or read the yardsticks, run the passes and write the table."""
-    argv = [a for a in sys.argv[1:] if a != '--rebuild']
-    rebuild = len(argv) != len(sys.argv) - 1
-    sys.argv[1:] = argv
-    args, trees = _repo.comparison_args(__doc__.split('\n')[0], 2, OUT)
-    yard = _yardsticks(rebuild)
+    args, trees = _repo.comparison_args(
+        __doc__.split('\n')[0], 2, OUT, lambda ap: ap.add_argument(
+            '--rebuild', action='store_true', help='recompute every cached yardstick'))
+    yard = _yardsticks(args.rebuild)
     runs = _repo.interleaved(trees, args.repeats, lambda tree: _repo.fresh_json(
         _PASS, tree, ','.join(map(str, SEEDS))))
     labels = [label for label, _ in trees]
