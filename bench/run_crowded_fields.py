@@ -3,6 +3,11 @@
 Usage (from the repository root)::
 
     .venv/bin/python bench/run_crowded_fields.py [--base OTHER_CHECKOUT] [--repeats 2]
+    .venv/bin/python bench/run_crowded_fields.py --fields random   # run_random_fields' 45
+
+With ``--fields random`` the cases are the 45 random fields of ``run_random_fields.py``
+(12-120 threats at the 20-threat scenarios' density, intensities x 0.3-3), cached in
+``random_yardstick.json`` and written to ``random_yardstick.md``.
 
 The shared big300_0 is one crowded field; tuning on it alone would tune to a file. Here six
 fields are drawn like it (seeds 1-6): 300 threats uniform in [50, 950]^3 m of a 1 km box,
@@ -19,6 +24,7 @@ checkout and pass, the checkouts taking turns; ms = the least of the passes. Wri
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import statistics
 import sys
 import time
@@ -29,8 +35,8 @@ import numpy as np
 ROOT = _repo.ROOT
 OUT = ROOT / 'bench' / 'results' / 'crowded_fields.md'
 CACHE = ROOT / 'bench' / 'results' / 'crowded_yardstick.json'
-SEEDS = range(1, 7)
-WS = (0.2, 0.5, 0.8)
+RANDOM_OUT = ROOT / 'bench' / 'results' / 'random_yardstick.md'
+RANDOM_CACHE = ROOT / 'bench' / 'results' / 'random_yardstick.json'
 GRID = 31
 
 _FIELD = r'''
@@ -44,64 +50,80 @@ def field(seed):
             np.array([1000.0, 1000.0, 500.0]), Box.from_corners([0.0] * 3, [1000.0] * 3))
 '''
 
+_CASES = _FIELD + r'''
+def cases(fields):
+    """(key, threats, start, goal, box, w) of every case of a field set."""
+    if fields == 'random':
+        import run_random_fields   # after the checkout's threat_planner is imported
+        yield from run_random_fields.fields()
+        return
+    for seed in range(1, 7):
+        threats, s, t, box = field(seed)
+        for w in (0.2, 0.5, 0.8):
+            yield f'{seed}@{w}', threats, s, t, box, w
+'''
+
 _PASS = r'''
 import json, sys, time
 sys.path.insert(0, sys.argv[1])
 from threat_planner.core.planner import plan, PlannerConfig
-''' + _FIELD + r'''
+sys.path.append(sys.argv[3])
+''' + _CASES + r'''
 OFF = {'max_climb_deg': 90.0, 'max_dive_deg': 90.0, 'min_turn_radius_m': 0.0}
 out = {}
-for seed in map(int, sys.argv[2].split(',')):
-    threats, s, t, box = field(seed)
-    for w in (0.2, 0.5, 0.8):
-        for rules, extra in (('off', OFF), ('on', {})):
-            cfg = PlannerConfig(w=w, **extra)
-            if not out:
-                plan(threats, s, t, box, cfg)   # loads the compiled kernels
-            t0 = time.perf_counter()
-            r = plan(threats, s, t, box, cfg)
-            out[f'{rules}:{seed}@{w}'] = (1e3 * (time.perf_counter() - t0), r.cost.J,
-                                          bool(r.feasible))
+for key, threats, s, t, box, w in cases(sys.argv[2]):
+    for rules, extra in (('off', OFF), ('on', {})):
+        cfg = PlannerConfig(w=w, **extra)
+        if not out:
+            plan(threats, s, t, box, cfg)   # loads the compiled kernels
+        t0 = time.perf_counter()
+        r = plan(threats, s, t, box, cfg)
+        out[f'{rules}:{key}'] = (1e3 * (time.perf_counter() - t0), r.cost.J, bool(r.feasible))
 print(json.dumps(out))
 '''
 
 
-def _yardsticks(rebuild: bool) -> dict:
+def _yardsticks(fields: str, cache_path: Path, rebuild: bool) -> dict:
     """The cached yardstick of every case, computed where missing (or all: rebuild)."""
     import yardstick
     from threat_planner.core.cost import path_cost
     scope: dict = {}
-    exec(_FIELD, scope)
-    cache = {} if rebuild or not CACHE.exists() else json.loads(CACHE.read_text())
-    for seed in SEEDS:
-        threats, s, t, box = scope['field'](seed)
-        for w in WS:
-            key = f'{seed}@{w}'
-            if key not in cache:
-                print(f'yardstick {key} ...', file=sys.stderr, flush=True)
-                ys = yardstick.in_box_yardstick(threats, s, t, box, w, grid=GRID)
-                cache[key] = {'J': ys['J'], 'how': ys['how'], 'seconds': ys['seconds'],
-                              'path': np.asarray(ys['path']).tolist()}
-                CACHE.write_text(json.dumps(cache))
-            path = np.array(cache[key]['path'])
-            tol = 1e-6 * box.diagonal
-            assert np.all(path >= box.lo - tol) and np.all(path <= box.hi + tol), key
-            j = path_cost(path, threats.positions, threats.intensities, w).J
-            assert abs(j / cache[key]['J'] - 1.0) < 1e-9, (key, j, cache[key]['J'])
+    exec(_CASES, scope)
+    cache = {} if rebuild or not cache_path.exists() else json.loads(cache_path.read_text())
+    for key, threats, s, t, box, w in scope['cases'](fields):
+        if key not in cache:
+            print(f'yardstick {key} ...', file=sys.stderr, flush=True)
+            ys = yardstick.in_box_yardstick(threats, s, t, box, w, grid=GRID)
+            cache[key] = {'J': ys['J'], 'how': ys['how'], 'seconds': ys['seconds'],
+                          'path': np.asarray(ys['path']).tolist()}
+            cache_path.write_text(json.dumps(cache))
+        path = np.array(cache[key]['path'])
+        tol = 1e-6 * box.diagonal
+        assert np.all(path >= box.lo - tol) and np.all(path <= box.hi + tol), key
+        j = path_cost(path, threats.positions, threats.intensities, w).J
+        assert abs(j / cache[key]['J'] - 1.0) < 1e-9, (key, j, cache[key]['J'])
     return cache
 
 
 def main() -> None:
     """Build or read the yardsticks, run the passes and write the table."""
-    args, trees = _repo.comparison_args(
-        __doc__.split('\n')[0], 2, OUT, lambda ap: ap.add_argument(
-            '--rebuild', action='store_true', help='recompute every cached yardstick'))
-    yard = _yardsticks(args.rebuild)
+    def more(ap):
+        ap.add_argument('--rebuild', action='store_true',
+                        help='recompute every cached yardstick')
+        ap.add_argument('--fields', choices=('crowded', 'random'), default='crowded',
+                        help="the six crowded fields, or run_random_fields' 45 cases")
+    args, trees = _repo.comparison_args(__doc__.split('\n')[0], 2, OUT, more)
+    random = args.fields == 'random'
+    out = args.out if args.out != OUT or not random else RANDOM_OUT
+    yard = _yardsticks(args.fields, RANDOM_CACHE if random else CACHE, args.rebuild)
     runs = _repo.interleaved(trees, args.repeats, lambda tree: _repo.fresh_json(
-        _PASS, tree, ','.join(map(str, SEEDS))))
+        _PASS, tree, args.fields, ROOT / 'bench'))
     labels = [label for label, _ in trees]
-    lines = ['# `best` on crowded fields (300 threats, 1 km box)', '',
-             f'Written by `bench/run_crowded_fields.py` on {time.strftime("%Y-%m-%d %H:%M")}: '
+    title = ("`best` on run_random_fields' fields (12-120 threats)" if random else
+             '`best` on crowded fields (300 threats, 1 km box)')
+    lines = [f'# {title}', '',
+             f'Written by `bench/run_crowded_fields.py --fields {args.fields}` on '
+             f'{time.strftime("%Y-%m-%d %H:%M")}: '
              + ', '.join(f'{label} = `{_repo.short_commit(tree)}`' for label, tree in trees)
              + f'; {args.repeats} passes per checkout in fresh processes, taking turns; ms = '
              'the least of the passes; a 2-core machine shared with other jobs. Fields and '
@@ -113,18 +135,16 @@ def main() -> None:
                  f'{lab}: off | {lab}: off ms | {lab}: on | {lab}: on ms' for lab in labels)
              + ' |', '|---|---:|' + '---:|' * 4 * len(labels)]
     summary = {}
-    for seed in SEEDS:
-        for w in WS:
-            key = f'{seed}@{w}'
-            row = f'| {key} | {yard[key]["J"]:.2f} |'
-            for lab in labels:
-                for rules in ('off', 'on'):
-                    cell = [p[f'{rules}:{key}'] for p in runs[lab]]
-                    ratio = cell[0][1] / yard[key]['J'] if cell[0][2] else float('inf')
-                    ms = min(c[0] for c in cell)
-                    summary.setdefault((lab, rules), []).append((ratio, ms))
-                    row += f' {ratio:.4f} | {ms:.0f} |'
-            lines.append(row)
+    for key in (k.split(':', 1)[1] for k in runs[labels[0]][0] if k.startswith('off:')):
+        row = f'| {key} | {yard[key]["J"]:.2f} |'
+        for lab in labels:
+            for rules in ('off', 'on'):
+                cell = [p[f'{rules}:{key}'] for p in runs[lab]]
+                ratio = cell[0][1] / yard[key]['J'] if cell[0][2] else float('inf')
+                ms = min(c[0] for c in cell)
+                summary.setdefault((lab, rules), []).append((ratio, ms))
+                row += f' {ratio:.4f} | {ms:.0f} |'
+        lines.append(row)
     lines += ['', '| checkout | rules | median ratio | worst ratio | median ms |',
               '|---|---|---:|---:|---:|']
     for (lab, rules), vals in summary.items():
@@ -133,7 +153,7 @@ def main() -> None:
                      f'{max(ratios):.4f} | {statistics.median(v[1] for v in vals):.0f} |')
     lines += ['', 'Target (issue 11, limits off): median <= 1.002, worst <= 1.02.']
     text = '\n'.join(lines) + '\n'
-    args.out.write_text(text)
+    out.write_text(text)
     print(text, end='')
 
 
