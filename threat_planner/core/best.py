@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from threat_planner.core.basins import (basin_lead, COARSE_SEGMENTS, refined_margin,
                                         runner_up_gate, same_basin)
-from threat_planner.core.limits import check_limits, FlightLimits, relative_excess
+from threat_planner.core.limits import check_limits, FlightLimits
 from threat_planner.core.optimisation import is_crowded, minimise_cost
 from threat_planner.core.problem import Candidate, Problem, smooth_route
 from threat_planner.core.search import alternative_routes, nearest_nodes, segment_costs
@@ -50,8 +50,10 @@ OPTIMISER_CUTOFF_SPACINGS = 3.0
 FEASIBILITY_TRIES = 3
 #: Basins refined when the limits bind (the best feasible one kept).
 BOUND_BASINS = 2
-#: Most rounds-again runs on a candidate that stalled short of a limit (:func:`_rescue`).
-RESCUE_TRIES = 3
+#: Most rounds-again runs on a candidate that stalled short of a limit (:func:`_rescue`);
+#: on the 45 random fields and 18 crowded ones, 5 runs against 3 that also stopped once
+#: the violation rose changed one plan (J 998 -> 826) for 2 % more time.
+RESCUE_TRIES = 5
 #: Bisection steps of the last-resort repair towards the straight line.
 REPAIR_BISECTIONS = 20
 
@@ -219,21 +221,21 @@ def _rescue(p: Problem, best: Candidate, refined: list[Candidate]) -> Candidate:
     The rounds can stall just short of a limit: on a crowded field a 30 deg climb ended
     at 32.6 deg (J 36,436) and a basin 51 % higher won. Rounds again from where it
     stopped, with a fresh penalty, met the climb at J 36,451; on another the violation
-    went 3.3 -> 1.1 deg -> met (J 24,002 against 31,800). Tried on the infeasible
+    went 3.3 -> 1.1 deg -> met (J 24,002 against 31,800); on a third it rose and fell
+    for four runs and the fifth met it (J 826 against 998). Tried on the infeasible
     candidates below best's J, least J first, until one succeeds: up to RESCUE_TRIES
-    times each while the worst violation falls.
+    runs each.
     """
     stalled = sorted((c for c in refined if not _usable(c) and np.isfinite(c.cost.J)
                       and len(c.final) == p.config.n_points + 1), key=lambda c: c.cost.J)
     for cand in stalled:
         if _usable(best) and cand.cost.J >= best.cost.J:
             break
-        again, worst = cand, _worst_violation(p, cand)
+        again = cand
         for _ in range(RESCUE_TRIES):
             again = refine(p, again.final, cand.seq, f'{cand.seed}, rounds again', warm=True)
-            if _usable(again) or _worst_violation(p, again) >= worst:
+            if _usable(again):
                 break
-            worst = _worst_violation(p, again)
         if _usable(again) and (not _usable(best) or again.cost.J < best.cost.J):
             again.limits_bound, again.levels = True, cand.levels
             return again
@@ -265,11 +267,6 @@ def _surface_alternative(p: Problem, best: Candidate, order: list, route: list[i
             lead = high.cost.J / low.cost.J - 1.0 if low.cost.J > 0 else 0.0
             return low, (min(margin, lead) if low is best else lead)
     return best, margin
-
-
-def _worst_violation(p: Problem, c: Candidate) -> float:
-    """Return the largest amount by which a candidate breaks a limit, over that limit."""
-    return max(relative_excess(c.limit_check.violations, p.limits).values(), default=0.0)
 
 
 def _usable(c: Candidate) -> bool:
