@@ -105,7 +105,7 @@ def _counts_far_threats(p: Problem) -> bool:
     dive 30 deg, turn radius 10 m): 1.7x the time (447 -> 774 ms) with J from -40 % to
     +2 % either way, so they keep the cut-offs.
     """
-    return is_crowded(p.threats, p.box) and not p.limits.any_constraint
+    return not p.limits.any_constraint and is_crowded(p.threats, p.box)
 
 
 def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
@@ -250,7 +250,8 @@ def _surface_alternative(p: Problem, best: Candidate, order: list, route: list[i
     J, while the network routes' J is a coarse minimum, and without limits no slope-held
     screening minimises them before the ranking. On 45 random fields (12-120 threats,
     limits off) the best surface route, ranked second, refined 3-4 % below the winning
-    route on 2 (n120 seed 2 w 0.5: 355.07 against 370.72) and 0.8 % on a third.
+    route on 2 (n120 seed 2 w 0.5: 355.07 against 370.72) and, ranked third, 0.8 % on
+    a third.
     Returns the better candidate and the warm-start lead (``margin``, the screening's,
     capped by the lead over the other refined basin).
     """

@@ -32,8 +32,7 @@ from numpy.typing import NDArray
 from threat_planner.core.limit_kernels import DEGENERATE, measure
 
 __all__ = ['FlightLimits', 'LimitCheck', 'check_limits', 'climb_angles', 'meets_limits',
-           'constraint_jacobian', 'constraint_values', 'constraint_vjp', 'relative_excess',
-           'turn_radii']
+           'constraint_jacobian', 'constraint_values', 'constraint_vjp', 'turn_radii']
 
 #: Slack of the final check, so a path optimised onto a limit is not failed by rounding.
 CHECK_SLACK = 1e-6
@@ -194,18 +193,13 @@ def check_limits(points: NDArray, limits: FlightLimits, floor_z: float) -> Limit
     """
     climb, dive, radius, alt = measure(points, floor_z)
     excess = _excess(climb, dive, radius, alt, limits)
-    rel = relative_excess(excess, limits)
-    worst = max(rel, key=rel.get) if rel else None
-    return LimitCheck(climb, dive, radius, alt, excess, worst)
-
-
-def relative_excess(violations: dict, limits: FlightLimits) -> dict:
-    """Each violation (``LimitCheck.violations``) over its limit (angles over >= 1 deg)."""
     unit = {'climb_deg': max(limits.max_climb_deg, 1.0),
             'dive_deg': max(limits.max_dive_deg, 1.0),
             'turn_radius_m': limits.min_turn_radius_m,
             'altitude_m': max(limits.min_altitude_m, 1.0)}
-    return {k: v / unit[k] for k, v in violations.items()}
+    rel = {k: v / unit[k] for k, v in excess.items()}
+    worst = max(rel, key=rel.get) if rel else None
+    return LimitCheck(climb, dive, radius, alt, excess, worst)
 
 
 def meets_limits(points: NDArray, limits: FlightLimits, floor_z: float) -> bool:
