@@ -17,8 +17,9 @@ from pathlib import Path
 import sys
 
 #: The modules compiled with ``cache=True`` and the ones whose constants they compile in.
-SOURCES = ('cost.py', 'kernels.py', 'lbfgs.py', 'limit_kernels.py', 'near_kernels.py',
-           'graph_kernels.py', 'lagrangian_kernels.py', 'limits.py', 'chain_kernels.py')
+SOURCES = ('cost.py', 'pair_integrals.py', 'kernels.py', 'lbfgs.py', 'limit_kernels.py',
+           'near_kernels.py', 'graph_kernels.py', 'lagrangian_kernels.py', 'limits.py',
+           'chain_kernels.py')
 
 
 def cache_dir() -> Path:

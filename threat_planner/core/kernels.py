@@ -1,13 +1,13 @@
 """Compiled kernels (numba) for J and its gradient on the optimiser's hot path.
 
-The same closed form as :mod:`threat_planner.core.cost` (the split antiderivatives that
-cancel the large atan terms symbolically, the same series below ``_SERIES_LIMIT``), written
-as one loop over (segment, threat) pairs so that a 40-segment, 20-threat evaluation costs
-microseconds instead of the ~0.3 ms numpy spends on call overhead. ``cache=True`` keeps the
-compiled code on disk (in a folder named by a hash of the kernels' sources,
-:mod:`._numba_cache`): the first call in a fresh environment compiles (about 2 s, measured
-in ``bench/results/speed.md``), later processes load it in milliseconds. Without numba the
-same functions run as plain Python (correct, slow); numba is an install requirement.
+The closed form of :mod:`threat_planner.core.cost`, pair by pair (:mod:`.pair_integrals`),
+written as one loop over (segment, threat) pairs so that a 40-segment, 20-threat
+evaluation costs microseconds instead of the ~0.3 ms numpy spends on call overhead.
+``cache=True`` keeps the compiled code on disk (in a folder named by a hash of the
+kernels' sources, :mod:`._numba_cache`): the first call in a fresh environment compiles
+(about 2 s, measured in ``bench/results/speed.md``), later processes load it in
+milliseconds. Without numba the same functions run as plain Python (correct, slow); numba
+is an install requirement.
 """
 
 from __future__ import annotations
@@ -19,78 +19,12 @@ import threading
 import numpy as np
 from numpy.typing import NDArray
 
-try:
-    from numba import njit, prange
-    HAVE_NUMBA = True
-    from threat_planner.core import _numba_cache
-    _numba_cache.configure()
-except ImportError:  # pragma: no cover - numba is in install_requires
-    HAVE_NUMBA = False
-    prange = range
-
-    def njit(*args, **kwargs):  # noqa: D103
-        if args and callable(args[0]):
-            return args[0]
-        return lambda fn: fn
-
-from threat_planner.core.cost import _C2, _C3, _SERIES_LIMIT, CONTACT_DISTANCE, Cost
+from threat_planner.core.cost import _C2, _C3, Cost
+from threat_planner.core.pair_integrals import (_direct, _DIRECT_REACH, _far, _foot,
+                                                _pair_integral, _segment_total, HAVE_NUMBA,
+                                                njit, prange)
 
 __all__ = ['HAVE_NUMBA', 'cost_gradient', 'path_cost', 'segment_costs', 'warm_up']
-
-_PI = math.pi
-
-
-@njit(cache=True, inline='always')
-def _horner(x2, coeffs):
-    out = coeffs[-1]
-    for k in range(len(coeffs) - 2, -1, -1):
-        out = out * x2 + coeffs[k]
-    return out
-
-
-@njit(cache=True, inline='always')
-def _split(t, h, c2, c3):
-    """(c, r2, r3) of cost._antiderivatives for one abscissa t and distance h."""
-    abs_t = abs(t)
-    if abs_t > h:
-        s = 1.0 if t > 0 else -1.0
-        x = h / abs_t
-        if x < _SERIES_LIMIT:
-            x2 = x * x
-            g2 = _horner(x2, c2)
-            g3 = _horner(x2, c3)
-        else:
-            q = 1.0 / (1.0 + x * x)
-            at = math.atan(x)
-            g2 = (at - x * q) / x ** 3
-            g3 = (0.375 * at - 0.375 * x * q - 0.25 * x ** 3 * q * q) / x ** 5
-        return s, -s * g2 / (2.0 * abs_t ** 3), -s * g3 / abs_t ** 5
-    hn = h if h > 0 else math.inf
-    r = t / hn
-    q = 1.0 / (1.0 + r * r)
-    at = math.atan(r)
-    return (0.0, (at + r * q) / (2.0 * hn ** 3),
-            (0.375 * at + 0.375 * r * q + 0.25 * r * q * q) / hn ** 5)
-
-
-@njit(cache=True, inline='always')
-def _foot(ax, ay, az, ux, uy, uz, ln, positions, i):
-    """Threat i against the segment of length ln [m] from (ax, ay, az) along unit u.
-
-    Returns ``(t1, t2, px, py, pz, h2, h, hit)``: the segment's ends along its line from
-    the foot of the perpendicular, the threat-to-line offset p, |p|^2 and |p|, and whether
-    the segment passes within CONTACT_DISTANCE of the threat.
-    """
-    ex = ax - positions[i, 0]
-    ey = ay - positions[i, 1]
-    ez = az - positions[i, 2]
-    t1 = ex * ux + ey * uy + ez * uz
-    t2 = t1 + ln
-    px, py, pz = ex - t1 * ux, ey - t1 * uy, ez - t1 * uz
-    h2 = px * px + py * py + pz * pz
-    h = math.sqrt(h2)
-    hit = h < CONTACT_DISTANCE and t1 <= CONTACT_DISTANCE and t2 >= -CONTACT_DISTANCE
-    return t1, t2, px, py, pz, h2, h, hit
 
 
 @njit(cache=True)
@@ -148,20 +82,17 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
             t1, t2, px, py, pz, h2, h, hit = _foot(x0, y0, z0, ux, uy, uz, ln, positions, i)
             if hit:
                 return math.inf
-            ca, r2a, r3a = _split(t1, h, c2, c3)
-            cb, r2b, r3b = _split(t2, h, c2, c3)
-            dc = cb - ca
-            i2 = r2b - r2a
-            i3 = r3b - r3a
-            if dc != 0:
-                i2 += dc * (_PI / 4.0) / h ** 3
-                i3 += dc * (3.0 * _PI / 16.0) / h ** 5
+            ida = 1.0 / (t1 * t1 + h2)
+            idb = 1.0 / (t2 * t2 + h2)
+            reach = _DIRECT_REACH * h
+            if abs(t1) <= reach and abs(t2) <= reach:
+                i2, i3 = _direct(t1, t2, h, h2, ln, ida, idb)
+            else:
+                i2, i3 = _far(t1, t2, h, c2, c3)
             fi = f[i]
             j_r += fi * i2
-            da = t1 * t1 + h2
-            db = t2 * t2 + h2
-            phi_a = fi / (da * da)
-            phi_b = fi / (db * db)
+            phi_a = fi * ida * ida
+            phi_b = fi * idb * idb
             m0 = 4.0 * fi * i3
             coef_a = (phi_a - phi_b) * il - m0 * (1.0 + t1 * il)
             coef_b = (phi_b - phi_a) * il + m0 * t1 * il
@@ -175,54 +106,6 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
         grad[s + 1, 0], grad[s + 1, 1], grad[s + 1, 2] = gbx, gby, gbz
         k = end
     return w * j_r + (1.0 - w) * j_l
-
-
-@njit(cache=True, inline='always')
-def _unit(a, b, s):
-    """Length of segment s (a[s] -> b[s]) and its direction (zero for a zero length)."""
-    dx = b[s, 0] - a[s, 0]
-    dy = b[s, 1] - a[s, 1]
-    dz = b[s, 2] - a[s, 2]
-    ln = math.sqrt(dx * dx + dy * dy + dz * dz)
-    if ln == 0:
-        return 0.0, 0.0, 0.0, 0.0
-    return ln, dx / ln, dy / ln, dz / ln
-
-
-@njit(cache=True, inline='always')
-def _pair_integral(a, b, s, positions, i, c2, c3):
-    """Integral of ds / d^4 along segment s (a[s] -> b[s]) from threat i; inf on a hit."""
-    ln, ux, uy, uz = _unit(a, b, s)
-    if ln == 0:
-        return 0.0
-    return _along(a[s, 0], a[s, 1], a[s, 2], ux, uy, uz, ln, positions, i, c2, c3)
-
-
-@njit(cache=True, inline='always')
-def _along(ax, ay, az, ux, uy, uz, ln, positions, i, c2, c3):
-    """Integral of ds / d^4 from threat i along ln [m] from (ax, ay, az) in direction u."""
-    t1, t2, _, _, _, _, h, hit = _foot(ax, ay, az, ux, uy, uz, ln, positions, i)
-    if hit:
-        return math.inf
-    ca, r2a, _ = _split(t1, h, c2, c3)
-    cb, r2b, _ = _split(t2, h, c2, c3)
-    i2 = r2b - r2a
-    if cb != ca:
-        i2 += (cb - ca) * (_PI / 4.0) / h ** 3
-    return i2
-
-
-@njit(cache=True, inline='always')
-def _segment_total(a, b, s, positions, f, c2, c3):
-    """J_R of segment s over every threat (its direction computed once)."""
-    ln, ux, uy, uz = _unit(a, b, s)
-    if ln == 0:
-        return 0.0
-    ax, ay, az = a[s, 0], a[s, 1], a[s, 2]
-    total = 0.0
-    for i in range(positions.shape[0]):
-        total += f[i] * _along(ax, ay, az, ux, uy, uz, ln, positions, i, c2, c3)
-    return total
 
 
 @njit(cache=True)

@@ -17,9 +17,9 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-
-from threat_planner.core.kernels import (_FROZEN_C2, _FROZEN_C3, _frozen, _pair_integral, njit,
+from threat_planner.core.kernels import (_FROZEN_C2, _FROZEN_C3, _frozen, njit,
                                          PARALLEL_LOCK, prange)
+from threat_planner.core.pair_integrals import _pair_integral
 
 __all__ = ['near_segment_costs']
 
