@@ -247,7 +247,8 @@ def test_surface_routes_cost_the_lattice_exactly_up_to_the_pairs_allowed(monkeyp
 
 def test_a_candidate_stalled_short_of_a_limit_gets_rounds_again_and_wins(monkeypatch):
     # A crowded field (bench/run_crowded_fields.py, seed 6) where the rounds on the best
-    # basin stopped at a 32.6 deg climb against 30 deg and a basin 51 % higher won.
+    # basin stopped at a 32.6 deg climb against 30 deg and a basin 51 % higher won (33 %
+    # since the kernels' one-atan pair form: which stalled basin wins moves with rounding).
     import threat_planner.core.best as best
     from threat_planner.core.planner import plan, PlannerConfig
     from threat_planner.core.threats import ThreatField
@@ -262,7 +263,7 @@ def test_a_candidate_stalled_short_of_a_limit_gets_rounds_again_and_wins(monkeyp
     plain = plan(threats, s, t, box, cfg)
     assert rescued.feasible and plain.feasible
     assert rescued.seed.endswith('rounds again')
-    assert rescued.cost.J < 0.75 * plain.cost.J
+    assert rescued.cost.J < 0.8 * plain.cost.J
 
 
 def test_without_limits_the_best_surface_route_is_refined_when_a_network_route_won(
