@@ -9,8 +9,9 @@ rounds at 20 threats are most of a plan's compiled time) called in a compiled lo
 that no dispatch overhead is counted, on a 40-segment path through ``uniform20_0``:
 
 * every pair (dense), the pairs listed by segment (as a cut-off gives them) and shuffled;
-* a floor: one square root and two arctangents per pair, the transcendental part of the
-  closed form that no rearrangement removes;
+* a floor: one square root and one arctangent per pair, the transcendental part of the
+  closed form that no rearrangement removes (:mod:`threat_planner.core.pair_integrals`:
+  the difference of the two ends' atan terms is one atan of the subtended angle);
 * with ``--base``, the same rows for the kernel of another checkout (a fresh process),
   interleaved with this one's so that the load of a shared machine hits both alike.
 
@@ -70,7 +71,7 @@ def floor(p, pos, n):
                 dy = p[a, 1] - pos[i, 1]
                 dz = p[a, 2] - pos[i, 2]
                 h = math.sqrt(dx * dx + dy * dy + dz * dz)
-                s += math.atan(dx / h) + math.atan(dy / h)
+                s += math.atan(dx / h)
     return s
 
 
@@ -80,7 +81,7 @@ rows = {
     'pairs by segment': lambda n: loop(p, pos, f, seg, thr, _FROZEN_C2, _FROZEN_C3, g, n),
     'pairs shuffled': lambda n: loop(p, pos, f, seg[mix].copy(), thr[mix].copy(),
                                      _FROZEN_C2, _FROZEN_C3, g, n),
-    'floor: sqrt + 2 atan': lambda n: floor(p, pos, n),
+    'floor: sqrt + atan': lambda n: floor(p, pos, n),
 }
 for run in rows.values():
     run(1)
@@ -114,7 +115,7 @@ def main() -> None:
              f'{"x floor":>8s}']
     for label, passes in runs.items():
         med = {row: statistics.median(p[row] for p in passes) for row in passes[0]}
-        floor = med['floor: sqrt + 2 atan']
+        floor = med['floor: sqrt + atan']
         for row, us in med.items():
             lines.append(f'{label:24s} {row:22s} {us:16.1f} {1e3 * us / pairs:10.1f} '
                          f'{us / floor:8.2f}')
