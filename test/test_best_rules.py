@@ -266,6 +266,36 @@ def test_a_candidate_stalled_short_of_a_limit_gets_rounds_again_and_wins(monkeyp
     assert rescued.cost.J < 0.8 * plain.cost.J
 
 
+def test_each_rescue_run_starts_at_a_higher_penalty_until_it_meets_the_limits(monkeypatch):
+    # Restarted at the usual penalty every time, the rounds traded a climb violation back
+    # for J run after run; each run now starts RESCUE_GROWTH times higher. Here the first
+    # two runs are made to come back stalled, as they did on the measured field.
+    import dataclasses
+    import threat_planner.core.best as best
+    from threat_planner.core.limits import LimitCheck
+    from threat_planner.core.optimisation import PENALTY_START
+    from threat_planner.core.planner import plan, PlannerConfig
+    sc = load_scenario(DATA / 'uniform20_0.yaml')
+    real, seen, first = best.refine, [], []
+
+    def refine(p, start, seq, name, **kw):
+        cand = real(p, start, seq, name, **kw)
+        if not kw.get('warm'):
+            if not first and cand.limits_bound:
+                first.append(name)
+            # The first refined basin stalls (also when refined again from the start).
+            return dataclasses.replace(cand, limit_check=stalled) if name in first else cand
+        seen.append(kw['penalty'])
+        return cand if len(seen) >= 3 else dataclasses.replace(cand, limit_check=stalled)
+
+    stalled = LimitCheck(31.0, 0.0, 50.0, 0.0, {'climb_deg': 1.0}, 'climb_deg')
+    monkeypatch.setattr(best, 'refine', refine)
+    monkeypatch.setattr(best, 'RESCUE_MARGIN', 10.0)      # whatever the runner-up's J
+    r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.8))
+    assert seen == [PENALTY_START * best.RESCUE_GROWTH ** k for k in range(3)]
+    assert r.feasible and r.seed.endswith('rounds again')
+
+
 def test_without_limits_the_best_surface_route_is_refined_when_a_network_route_won(
         monkeypatch):
     # bench/run_random_fields.py's field n120 seed 2: a lattice route ranked second by its

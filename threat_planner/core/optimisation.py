@@ -102,7 +102,8 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
                   max_iterations: int = 1000, tolerance: float = 1e-6,
                   constrained_iterations: int = 200, constrained_rounds: int = MAX_OUTER,
                   constrained_only: bool = False, box_broken: bool = False,
-                  gate: Callable[[NDArray], bool] | None = None) -> OptimisationResult:
+                  gate: Callable[[NDArray], bool] | None = None,
+                  penalty: float = PENALTY_START) -> OptimisationResult:
     """Minimise J over the interior vertices within the box and the flight limits.
 
     Parameters
@@ -141,6 +142,8 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         Called with each coarser level's answer under binding limits; True stops there
         (``points`` that answer), for a caller that decides level by level whether the
         finer levels are worth their cost.
+    penalty : float
+        First penalty of every level's augmented Lagrangian rounds (scaled objective).
 
     Returns
     -------
@@ -204,7 +207,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         path = _prolong(x, count) if finest else resample(x, count)
         lvl = level if finest else probe if count == probe.n - 1 else _Level(
             path, threats, w, box, limits, cutoff, COARSE_LEVEL_TOLERANCE, stats, smooth)
-        x, lam, best = lvl.constrained(path, lam, PENALTY_START, constrained_iterations,
+        x, lam, best = lvl.constrained(path, lam, penalty, constrained_iterations,
                                        constrained_rounds, keep_start=keep and finest,
                                        gain=FINEST_GAIN if finest else None)
         if not finest:
