@@ -246,9 +246,11 @@ def test_surface_routes_cost_the_lattice_exactly_up_to_the_pairs_allowed(monkeyp
 
 
 def test_a_candidate_stalled_short_of_a_limit_gets_rounds_again_and_wins(monkeypatch):
-    # A crowded field (bench/run_crowded_fields.py, seed 6) where the rounds on the best
-    # basin stopped at a 32.6 deg climb against 30 deg and a basin 51 % higher won (33 %
-    # since the kernels' one-atan pair form: which stalled basin wins moves with rounding).
+    # A crowded field (bench/run_crowded_fields.py, seed 6) where, measured, the rounds on
+    # the best basin stopped at a 32.6 deg climb against 30 deg and a basin 51 % higher
+    # won. Whether they stall there moves with rounding (a 1 nm move of the threats, or
+    # another CPU, and they do not), so the stall is made here: the best basin's rounds
+    # start at a penalty too weak to enforce anything.
     import threat_planner.core.best as best
     from threat_planner.core.planner import plan, PlannerConfig
     from threat_planner.core.threats import ThreatField
@@ -258,12 +260,20 @@ def test_a_candidate_stalled_short_of_a_limit_gets_rounds_again_and_wins(monkeyp
     box = Box.from_corners([0.0] * 3, [1000.0] * 3)
     s, t = np.array([0.0, 0.0, 500.0]), np.array([1000.0, 1000.0, 500.0])
     cfg = PlannerConfig(w=0.8)
+    real = best.refine
+
+    def weak(p, start, seq, name, **kw):
+        if name.startswith('surface route 0') and not kw.get('warm'):
+            kw['penalty'] = 1e-9
+        return real(p, start, seq, name, **kw)
+
+    monkeypatch.setattr(best, 'refine', weak)
     rescued = plan(threats, s, t, box, cfg)
     monkeypatch.setattr(best, '_rescue', lambda p, b, refined: b)
     plain = plan(threats, s, t, box, cfg)
     assert rescued.feasible and plain.feasible
-    assert rescued.seed.endswith('rounds again')
-    assert rescued.cost.J < 0.8 * plain.cost.J
+    assert rescued.seed.startswith('surface route 0') and rescued.seed.endswith('rounds again')
+    assert rescued.cost.J < 0.9 * plain.cost.J
 
 
 def test_each_rescue_run_starts_at_a_higher_penalty_until_it_meets_the_limits(monkeypatch):
