@@ -233,9 +233,9 @@ def _rescue(p: Problem, best: Candidate, refined: list[Candidate]) -> Candidate:
     stopped, with a fresh penalty, met the climb at J 36,451; on another the violation
     went 3.3 -> 1.1 deg -> met (J 24,002 against 31,800); on a third it rose and fell
     for four runs and the fifth met it (J 826 against 998). Each run starts at a penalty
-    RESCUE_GROWTH times the last one's. Tried on the infeasible
-    candidates below (1 + RESCUE_MARGIN) x best's J, least J first, until one beats
-    best: up to RESCUE_TRIES runs each.
+    RESCUE_GROWTH times the last one's. Tried on the infeasible candidates below
+    (1 + RESCUE_MARGIN) x best's J, least J first, until one beats best: up to
+    RESCUE_TRIES runs each.
     """
     stalled = sorted((c for c in refined if not _usable(c) and np.isfinite(c.cost.J)
                       and len(c.final) == p.config.n_points + 1), key=lambda c: c.cost.J)

@@ -84,6 +84,8 @@ def _kernel(points, positions, f, w, seg, thr, c2, c3, grad):
                 return math.inf
             ida = 1.0 / (t1 * t1 + h2)
             idb = 1.0 / (t2 * t2 + h2)
+            # The form chosen here, not in a shared helper: returning one helper's tuple
+            # from either branch made this loop 20.5 -> 34.7 us (profile_kernel.py).
             reach = _DIRECT_REACH * h
             if abs(t1) <= reach and abs(t2) <= reach:
                 i2, i3 = _direct(t1, t2, h, h2, ln, ida, idb)
