@@ -25,13 +25,12 @@ import numpy as np
 
 import _repo  # puts the repository root on sys.path first
 import run_random_fields
+from run_speed import SCENARIOS, WS   # the bundled 20-threat cases the speed bench plans
 from threat_planner import load_scenario, plan, PlannerConfig
 from threat_planner.core.settings import NO_LIMITS
 from threat_planner.core.threats import ThreatField
 
 OUT = _repo.ROOT / 'bench' / 'results' / 'perturbation.md'
-BUNDLED = ('uniform20_0', 'uniform20_1', 'weak20_0', 'strongweak_0', 'clustered_0',
-           'ground_0', 'coplanar_0')
 #: How far every threat moves [m].
 NUDGE = 1e-9
 #: Nudged fields per case.
@@ -42,9 +41,9 @@ MOVED = 1e-3
 
 def cases():
     """(name, threats, start, goal, box, w) of the bundled and the fresh cases."""
-    for name in BUNDLED:
+    for name in SCENARIOS:
         sc = load_scenario(_repo.ROOT / 'test' / 'data' / f'{name}.yaml')
-        for w in (0.2, 0.5, 0.8):
+        for w in WS:
             yield f'{name}@{w}', sc.threats, sc.start, sc.goal, sc.box, w
     yield from run_random_fields.fields()
 

@@ -12,7 +12,7 @@ ends lie along the line:
 * :func:`_far`, otherwise: :mod:`.cost`'s split antiderivatives (each large atan term
   cancelled symbolically) and, far along the line, their power series.
 
-:func:`_direct` made the 40-segment, 20-threat J and gradient 34 -> 21 us (the two atan
+:func:`_direct` made the 40-segment, 20-threat J and gradient 35.7 -> 22.2 us (the two atan
 and about ten divisions per pair of :func:`_far` before; ``bench/results/
 profile_kernel.txt``). Importing this module points numba's cache at
 :mod:`._numba_cache`; without numba the functions run as plain Python (correct, slow).
