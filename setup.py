@@ -47,7 +47,7 @@ setup(
             'planner_node = threat_planner.ros.node:main',
             'planner_lifecycle_node = threat_planner.ros.lifecycle:main',
             'threat_publisher = threat_planner.ros.publisher:main',
-            'threat_planner_demo = threat_planner.ros.demo:main',
+            'threat_planner_demo = threat_planner.cli.demo:main',
         ],
     },
 )

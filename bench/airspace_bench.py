@@ -27,13 +27,13 @@ import _repo  # noqa: F401  (puts the repository root on sys.path)
 import numpy as np
 
 from bench_tools import build_grid, grid_floor, ompl_available, SegmentCost, set_ompl_quiet
-from threat_planner.core.airspace_planning import masked_cost, minimise_in_airspace
-from threat_planner.core.config import PlannerConfig
-from threat_planner.core.cost import path_cost
-from threat_planner.core.masking import masked_segment_costs
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.cost.masking import masked_segment_costs
+from threat_planner.core.inputs.config import PlannerConfig
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.methods.in_airspace import masked_cost, minimise_in_airspace
+from threat_planner.core.optimise.smoothing import check_angles, resample
 from threat_planner.core.planner import plan
-from threat_planner.core.scenario import load_scenario
-from threat_planner.core.smoothing import check_angles, resample
 
 ROOT = Path(__file__).resolve().parents[1]
 GRID_N = 13

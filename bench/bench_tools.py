@@ -1,8 +1,8 @@
 """Pieces of the benchmark: reference loader, fast segment cost, OMPL runner, floors.
 
 Everything here scores paths with the library's closed-form cost
-(:func:`threat_planner.core.cost.path_cost`), so every method in the benchmark is judged by the
-same evaluator:
+(:func:`threat_planner.core.cost.closed_form.path_cost`), so every method in the
+benchmark is judged by the same evaluator:
 
 * :func:`load_reference` reads ``reference.json`` (``"scenario@w" -> {"J", "seconds"}``).
 * :class:`SegmentCost` is J of one straight segment against every threat, written for the
@@ -31,8 +31,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from threat_planner.core.cost import pair_integrals, path_cost, segment_threat_costs
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.cost.closed_form import pair_integrals, path_cost, segment_threat_costs
+from threat_planner.core.world.threats import Box, ThreatField
 
 try:
     from ompl import base as ob
@@ -110,7 +110,8 @@ class SegmentCost:
     ``(dtheta + h (t2/(t2^2+h^2) - t1/(t1^2+h^2))) / (2 h^3)`` with
     ``dtheta = atan2(h L, h^2 + t1 t2)``. Pairs where that loses digits (the threat almost
     on the segment's line beyond an end, or almost touching it) are handed to the library's
-    :func:`threat_planner.core.cost.pair_integrals`, so the result matches ``path_cost``.
+    :func:`threat_planner.core.cost.closed_form.pair_integrals`, so the result matches
+    ``path_cost``.
     """
 
     def __init__(self, positions: ArrayLike, intensities: ArrayLike, w: float) -> None:
@@ -454,7 +455,7 @@ def build_grid(threats: ThreatField, start: NDArray, goal: NDArray, box: Box,
     -------
     GridGraph
         The graph; J_R of all edges comes from one vectorised
-        :func:`threat_planner.core.cost.segment_threat_costs` call.
+        :func:`threat_planner.core.cost.closed_form.segment_threat_costs` call.
     """
     t0 = time.perf_counter()
     axes = [np.linspace(box.lo[i], box.hi[i], n) for i in range(3)]

@@ -50,11 +50,11 @@ import numpy as np
 from numpy.typing import NDArray
 from sensor_msgs.msg import PointCloud2
 
-from threat_planner.ros.conversions import ns_to_stamp, stamp_to_ns
-from threat_planner.errors import RecordingError
 from threat_planner.bag import read_messages
-from threat_planner.core.scenario import load_scenario, Scenario
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.inputs.scenario import load_scenario, Scenario
+from threat_planner.core.world.threats import Box, ThreatField
+from threat_planner.errors import RecordingError
+from threat_planner.ros.conversions import ns_to_stamp, stamp_to_ns
 
 SCALE10000 = Path('/work/shared/scenarios/scale10000.yaml')
 FLUSH_INTERVAL_S = 1.0

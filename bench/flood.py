@@ -48,7 +48,7 @@ from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
 from threat_planner.ros.conversions import ns_to_stamp, stamp_to_ns  # noqa: E402
-from threat_planner.core.scenario import load_scenario, Scenario  # noqa: E402
+from threat_planner.core.inputs.scenario import load_scenario, Scenario  # noqa: E402
 
 RESULTS = REPO / 'bench' / 'results'
 DEFAULT_SCENARIO = REPO / 'test' / 'data' / 'big300_0.yaml'

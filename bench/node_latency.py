@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
 from threat_planner.ros.conversions import stamp_to_ns  # noqa: E402
-from threat_planner.core.scenario import load_scenario  # noqa: E402
+from threat_planner.core.inputs.scenario import load_scenario  # noqa: E402
 
 DEFAULT_SCENARIOS = (REPO / 'test' / 'data' / 'uniform20_0.yaml',
                      REPO / 'test' / 'data' / 'big300_0.yaml',

@@ -4,13 +4,13 @@ Usage (from the repository root)::
 
     .venv/bin/python bench/profile_kernel.py [--base OTHER_CHECKOUT] [--out FILE]
 
-Times :func:`threat_planner.core.kernels._kernel` (the optimiser's hot path: 40-segment
+Times :func:`threat_planner.core.cost.kernels._kernel` (the optimiser's hot path: 40-segment
 rounds at 20 threats are most of a plan's compiled time) called in a compiled loop, so
 that no dispatch overhead is counted, on a 40-segment path through ``uniform20_0``:
 
 * every pair (dense), the pairs listed by segment (as a cut-off gives them) and shuffled;
 * a floor: one square root and one arctangent per pair, the transcendental part of the
-  closed form that no rearrangement removes (:mod:`threat_planner.core.pair_integrals`:
+  closed form that no rearrangement removes (:mod:`threat_planner.core.cost.pair_integrals`:
   the difference of the two ends' atan terms is one atan of the subtended angle);
 * with ``--base``, the same rows for the kernel of another checkout (a fresh process),
   interleaved with this one's so that the load of a shared machine hits both alike.
@@ -37,9 +37,9 @@ import json, math, sys, time
 sys.path.insert(0, sys.argv[1])
 import numba
 import numpy as np
-from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3, _NO_PAIRS, _kernel
-from threat_planner.core.scenario import load_scenario
-from threat_planner.core.smoothing import resample
+from threat_planner.core.cost.kernels import _FROZEN_C2, _FROZEN_C3, _NO_PAIRS, _kernel
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.optimise.smoothing import resample
 
 sc = load_scenario(sys.argv[2])
 pos = np.ascontiguousarray(sc.threats.positions)

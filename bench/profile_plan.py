@@ -19,8 +19,8 @@ import pstats
 import time
 
 import _repo  # noqa: F401  (puts the repository root on sys.path)
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan, PlannerConfig
-from threat_planner.core.scenario import load_scenario
 
 DATA = Path(__file__).resolve().parent.parent / 'test' / 'data'
 SCENARIOS = ('uniform20_0', 'uniform20_1', 'weak20_0', 'strongweak_0', 'ground_0')

@@ -55,8 +55,8 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from node_harness import (domain_id, info, planner_command, PYTHON, RosClient,  # noqa: E402
                           start_process, stop_process)
 
-from threat_planner.bag.replay import load_bag, replay_bag  # noqa: E402
-from threat_planner.core.scenario import load_scenario  # noqa: E402
+from threat_planner.ros.recording.replay import load_bag, replay_bag  # noqa: E402
+from threat_planner.core.inputs.scenario import load_scenario  # noqa: E402
 
 BAGS_DIR = REPO / 'test' / 'data' / 'bags'
 DATA = REPO / 'test' / 'data'

@@ -46,7 +46,7 @@ import numpy as np  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
 from threat_planner.bag import McapRecorder, read_ros_messages  # noqa: E402
-from threat_planner.core.scenario import load_scenario  # noqa: E402
+from threat_planner.core.inputs.scenario import load_scenario  # noqa: E402
 
 DEFAULT_SCENARIOS = (REPO / 'test' / 'data' / 'uniform20_0.yaml',
                      Path('/work/shared/scenarios/scale1000.yaml'))

@@ -47,9 +47,9 @@ import numpy as np
 from tqdm import tqdm
 import yardsticks as yd
 
-from threat_planner.core.cost import path_cost
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan, PlannerConfig
-from threat_planner.core.scenario import load_scenario
 
 RESULTS = Path(__file__).resolve().parent / 'results'
 WS = (0.2, 0.5, 0.8)

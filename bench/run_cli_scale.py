@@ -51,7 +51,7 @@ _TIME = re.compile(r'time: ([0-9.]+) ms')
 
 def split_scenario(yaml_path: Path, folder: Path) -> dict[str, Path]:
     """Write the scenario with its threats in a .npy and in a .csv file; return the YAMLs."""
-    from threat_planner.core.scenario import load_scenario, save_scenario
+    from threat_planner.core.inputs.scenario import load_scenario, save_scenario
     sc = load_scenario(yaml_path)
     out = {}
     for suffix in ('npy', 'csv'):
@@ -101,7 +101,7 @@ def fresh_import_ms() -> dict:
 
 def load_ms(paths: dict[str, Path]) -> dict:
     """In-process ``load_scenario`` wall time [ms] per file (validation included)."""
-    from threat_planner.core.scenario import load_scenario
+    from threat_planner.core.inputs.scenario import load_scenario
     out = {}
     for label, path in paths.items():
         t0 = time.perf_counter()

@@ -42,7 +42,7 @@ GRID = 31
 _FIELD = r'''
 def field(seed):
     import numpy as np
-    from threat_planner.core.threats import Box, ThreatField
+    from threat_planner.core.world.threats import Box, ThreatField
     rng = np.random.default_rng([seed, 300, 77])
     positions = rng.uniform(50.0, 950.0, (300, 3))
     intensities = rng.uniform(1e9, 4e9, 300)
@@ -86,7 +86,7 @@ print(json.dumps(out))
 def _yardsticks(fields: str, cache_path: Path, rebuild: bool) -> dict:
     """The cached yardstick of every case, computed where missing (or all: rebuild)."""
     import yardstick
-    from threat_planner.core.cost import path_cost
+    from threat_planner.core.cost.closed_form import path_cost
     scope: dict = {}
     exec(_CASES, scope)
     cache = {} if rebuild or not cache_path.exists() else json.loads(cache_path.read_text())

@@ -9,7 +9,8 @@ plan to ``bench/results/inbox_quality.md`` (and ``.json``). Every J is the exact
 The yardstick's own paths are checked to lie in the box and re-scored with the library's cost.
 
 Usage: ``python bench/run_inbox_quality.py [--no-seeds] [--out NAME] [--repeats R]``.
-``--no-seeds`` drops the extra seeds of :mod:`threat_planner.core.seeds` (the 'before' row).
+``--no-seeds`` drops the extra seeds of :mod:`threat_planner.core.network.seeds` (the
+'before' row).
 """
 
 from __future__ import annotations
@@ -23,9 +24,9 @@ import time
 import _repo  # noqa: F401  (puts the repository root on sys.path)
 import numpy as np
 
-from threat_planner.core.cost import path_cost
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan, PlannerConfig
-from threat_planner.core.scenario import load_scenario
 
 SHARED = Path('/work/shared/scenarios')
 SCENARIOS = ('uniform20_0', 'uniform20_1', 'clustered_0', 'coplanar_0', 'ground_0',

@@ -31,7 +31,7 @@ _PASS = r'''
 import json, sys, time
 sys.path.insert(0, sys.argv[1])
 from threat_planner.core.planner import plan, PlannerConfig
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.inputs.scenario import load_scenario
 cases = [(name, w, load_scenario(f'{sys.argv[2]}/{name}.yaml'))
          for name in sys.argv[3].split(',') for w in (0.2, 0.5, 0.8)]
 out = {}

@@ -27,8 +27,8 @@ import _repo  # puts the repository root on sys.path first
 import run_random_fields
 from run_speed import SCENARIOS, WS   # the bundled 20-threat cases the speed bench plans
 from threat_planner import load_scenario, plan, PlannerConfig
-from threat_planner.core.settings import NO_LIMITS
-from threat_planner.core.threats import ThreatField
+from threat_planner.core.inputs.settings import NO_LIMITS
+from threat_planner.core.world.threats import ThreatField
 
 OUT = _repo.ROOT / 'bench' / 'results' / 'perturbation.md'
 #: How far every threat moves [m].

@@ -37,7 +37,7 @@ def fields():
     """Yield ``(name, threats, start, goal, box, w)`` of every random field."""
     import numpy as np
     import bench_tools as bt
-    from threat_planner.core.threats import ThreatField
+    from threat_planner.core.world.threats import ThreatField
     for n in SIZES:
         for seed in SEEDS:
             threats, s, t, box = bt.scale_problem(n, 100 + seed)

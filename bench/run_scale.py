@@ -81,8 +81,8 @@ def worker(n: int | None, scenario: str | None, seed: int, repeats: int, w: floa
     import tracemalloc
 
     from threat_planner.core.planner import plan, PlannerConfig
-    from threat_planner.core.scenario import load_scenario
-    from threat_planner.core.threats import ThreatField
+    from threat_planner.core.inputs.scenario import load_scenario
+    from threat_planner.core.world.threats import ThreatField
 
     if scenario:
         sc = load_scenario(scenario)

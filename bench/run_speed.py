@@ -31,9 +31,9 @@ import _repo  # noqa: F401  (puts the repository root on sys.path)
 
 import bench_tools as bt
 from threat_planner import load_scenario, plan, PlannerConfig
-from threat_planner.core.kernels import warm_up
-from threat_planner.core.limit_kernels import warm_up as warm_up_limits
-from threat_planner.core.settings import NO_LIMITS, PHYSICAL_LIMITS
+from threat_planner.core.cost.kernels import warm_up
+from threat_planner.core.inputs.settings import NO_LIMITS, PHYSICAL_LIMITS
+from threat_planner.core.optimise.limits import warm_up as warm_up_limits
 
 ROOT = _repo.ROOT
 RESULTS = ROOT / 'bench' / 'results'
@@ -159,7 +159,7 @@ def write_markdown(cold: list[dict], scale: list[dict], quality: list[dict],
                          + _verdict(row['ms'], TARGETS[f'{row["threats"]} cold']))
     lines.append(
         f'* warm replan at 20 threats, limits on: accepted {len(warm_on)} of {len(on)} '
-        '(core/warm.py: refused where the limits bound the previous plan and no second '
+        '(core/methods/warm.py: refused where the limits bound the previous plan and no second '
         'basin refined under them compares)'
         + (f', median {statistics.median(warm_on):.0f} ms: '
            + _verdict(statistics.median(warm_on), TARGETS['20 warm median'])

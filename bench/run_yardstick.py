@@ -34,7 +34,7 @@ import bench_tools as bt
 import numpy as np
 import yardstick as ys
 
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.inputs.scenario import load_scenario
 
 RESULTS = Path(__file__).resolve().parent / 'results'
 WS = (0.2, 0.5, 0.8)

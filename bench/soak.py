@@ -38,10 +38,10 @@ from node_harness import (cloud, domain_id, info, planner_command, RosClient, st
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
+from threat_planner.bag import read_messages
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.ros.conversions import ns_to_stamp, stamp_to_ns
 from threat_planner.ros.interface import THREAT_INPUT
-from threat_planner.bag import read_messages
-from threat_planner.core.scenario import load_scenario
 from threat_planner.ros.publisher import ThreatDrift
 
 REPO = flood.REPO

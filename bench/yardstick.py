@@ -2,7 +2,7 @@
 
 ``test/data/reference.json`` was refined without bounds, so its paths leave the box and it
 is only a lower bound. The yardsticks here play by the box's rules and score every path with
-the library's exact closed form (:func:`threat_planner.core.cost.path_cost`):
+the library's exact closed form (:func:`threat_planner.core.cost.closed_form.path_cost`):
 
 * :func:`in_box_yardstick` (no flight limits): a ``grid``^3 26-connected grid over the box
   (:func:`bench_tools.build_grid`, exact J of every edge), Dijkstra for ``routes``
@@ -17,7 +17,7 @@ the library's exact closed form (:func:`threat_planner.core.cost.path_cost`):
   when SLSQP ends infeasible); the lowest J among paths that pass the independent
   :func:`flight_limits.check_limits` kept.
 
-Neither calls ``threat_planner.core.optimisation``: the yardsticks are meant as a check on
+Neither calls ``threat_planner.core.optimise.optimisation``: the yardsticks are meant as a check on
 the planner, so they share only the cost function with it.
 """
 
@@ -35,8 +35,8 @@ from scipy.optimize import minimize
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from threat_planner.core.cost import cost_and_gradient, path_cost
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.cost.closed_form import cost_and_gradient, path_cost
+from threat_planner.core.world.threats import Box, ThreatField
 
 
 def resample(points: NDArray, n_segments: int) -> NDArray:

@@ -25,7 +25,7 @@ import bench_tools as bt
 from flight_limits import check_limits, Limits
 import numpy as np
 
-from threat_planner.core.cost import path_cost
+from threat_planner.core.cost.closed_form import path_cost
 
 CACHE = Path(__file__).resolve().parent / 'results' / 'yardstick.json'
 REFERENCE_BOX = bt.SHARED_SCENARIOS / 'reference_box.json'

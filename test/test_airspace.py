@@ -8,13 +8,13 @@ import pytest
 import yaml
 
 from threat_planner.cli.main import main
-from threat_planner.core.airspace import Airspace, make_zone
-from threat_planner.core.config import PlannerConfig
-from threat_planner.core.masking import masked_segment_costs
+from threat_planner.core.cost.masking import masked_segment_costs
+from threat_planner.core.inputs.config import PlannerConfig
+from threat_planner.core.inputs.scenario import load_scenario, scenario_from_dict
 from threat_planner.core.planner import plan
-from threat_planner.core.scenario import load_scenario, scenario_from_dict
-from threat_planner.core.terrain import Terrain
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.world.airspace import Airspace, make_zone
+from threat_planner.core.world.terrain import Terrain
+from threat_planner.core.world.threats import Box, ThreatField
 from threat_planner.errors import InputError, PlanningError, ScenarioError
 
 DATA = Path(__file__).parent / 'data'
@@ -313,8 +313,8 @@ def test_each_airspace_scenario_plans_with_positive_clearance(path, tmp_path):
         (c['terrain_m'] is None or c['terrain_m'] > 0)
     assert all(v > 0 for v in c['per_zone'].values())
     sc = load_scenario(path)
-    from threat_planner.core.airspace_planning import masked_cost
-    from threat_planner.core.cost import path_cost
+    from threat_planner.core.methods.in_airspace import masked_cost
+    from threat_planner.core.cost.closed_form import path_cost
     pts = np.array(r['path'])
     exact = (masked_cost(pts, sc.threats, 0.5, sc.airspace) if sc.airspace.masking else
              path_cost(pts, sc.threats.positions, sc.threats.intensities, 0.5))

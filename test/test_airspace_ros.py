@@ -17,20 +17,20 @@ from visualization_msgs.msg import Marker, MarkerArray
 import yaml
 
 from node_harness import pose, REPO
-from threat_planner.bag.replay import replay_bag
-from threat_planner.bag.record import record_plan
-from threat_planner.bag.bagfile import load_bag
-from threat_planner.core.airspace import Airspace, make_zone, zone_to_mapping
-from threat_planner.core.config import PlannerConfig
+from threat_planner.core.inputs.config import PlannerConfig
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan
-from threat_planner.core.scenario import load_scenario
-from threat_planner.core.terrain import Terrain
+from threat_planner.core.world.airspace import Airspace, make_zone, zone_to_mapping
+from threat_planner.core.world.terrain import Terrain
 from threat_planner.errors import InputError
 from threat_planner.ros.conversions import (image_from_terrain, terrain_from_image,
                                             zones_from_markers, zones_to_markers)
 from threat_planner.ros.inputs import accept, InputState
 from threat_planner.ros.outputs import plan_markers
 from threat_planner.ros.parameters import PARAMETER_DEFAULTS
+from threat_planner.ros.recording.bagfile import load_bag
+from threat_planner.ros.recording.record import record_plan
+from threat_planner.ros.recording.replay import replay_bag
 
 STAMP = Time(sec=5, nanosec=7)
 coord = st.floats(-500, 500, allow_nan=False).map(lambda v: round(v, 3))

@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 
-from threat_planner.core.threats import ThreatField
+from threat_planner.core.world.threats import ThreatField
 
 BENCH = Path(__file__).resolve().parents[1] / 'bench'
 if str(BENCH) not in sys.path:

@@ -8,9 +8,9 @@ import sys
 import numpy as np
 import pytest
 
-from threat_planner.core.cost import path_cost
-from threat_planner.core.scenario import load_scenario
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.world.threats import Box, ThreatField
 
 BENCH = Path(__file__).resolve().parents[1] / 'bench'
 DATA = Path(__file__).resolve().parent / 'data'

@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from threat_planner.core.cost import path_cost
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.inputs.scenario import load_scenario
 
 BENCH = Path(__file__).resolve().parents[1] / 'bench'
 if str(BENCH) not in sys.path:

@@ -6,11 +6,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from threat_planner.core.basins import (basin_lead as _lead, refined_margin as _refined_margin,
-                                        runner_up_lead as _runner_up_lead, RUNNER_UP_MARGIN)
-from threat_planner.core.optimisation import is_crowded
-from threat_planner.core.scenario import load_scenario
-from threat_planner.core.threats import Box
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.methods.basins import (basin_lead as _lead,
+                                                refined_margin as _refined_margin,
+                                                runner_up_lead as _runner_up_lead,
+                                                RUNNER_UP_MARGIN)
+from threat_planner.core.optimise.optimisation import is_crowded
+from threat_planner.core.world.threats import Box
 
 DATA = Path(__file__).resolve().parent / 'data'
 BOX = Box(np.zeros(3), np.full(3, 100.0))
@@ -80,7 +82,7 @@ def test_a_runner_up_is_finished_only_if_it_may_win():
 
 def test_the_runner_up_gate_compares_level_by_level_and_records_its_verdict():
     """A level best has no answer for goes on; a clearly worse one stops with its lead."""
-    from threat_planner.core.basins import runner_up_gate as _runner_up_gate
+    from threat_planner.core.methods.basins import runner_up_gate as _runner_up_gate
 
     class Costs(SimpleNamespace):
         def cost(self, points):
@@ -101,9 +103,9 @@ def test_the_runner_up_gate_compares_level_by_level_and_records_its_verdict():
 def test_the_preconditioner_runs_only_on_uncrowded_fields_with_every_threat(
         name, cut, smooth, monkeypatch):
     """Its path-wide steps crossed threat cores on big300_0 and unseen ones under a cut-off."""
-    from threat_planner.core import optimisation
-    from threat_planner.core.limits import FlightLimits
-    from threat_planner.core.smoothing import resample
+    from threat_planner.core.optimise import optimisation
+    from threat_planner.core.optimise.limits import FlightLimits
+    from threat_planner.core.optimise.smoothing import resample
 
     seen = []
     real = optimisation.minimise
@@ -123,7 +125,7 @@ def test_the_preconditioner_runs_only_on_uncrowded_fields_with_every_threat(
 @pytest.mark.parametrize('name, held_first', [('big300_0', False), ('uniform20_0', True)])
 def test_a_crowded_field_refines_the_box_only_ranking_first(name, held_first, monkeypatch):
     """8 segments misrank a crowded field's basins: there the box-only ranking leads."""
-    from threat_planner.core import best
+    from threat_planner.core.methods import best
     from threat_planner.core.planner import plan, PlannerConfig
     names = []
     real = best.refine
@@ -139,13 +141,13 @@ def test_a_crowded_field_refines_the_box_only_ranking_first(name, held_first, mo
 def test_a_seed_through_a_threat_never_wins(monkeypatch):
     """strongweak_0's straight line crosses a threat (J inf) yet meets the slopes: with two
     screening rounds it ranked first and was returned as the plan (PlanningError)."""
-    from threat_planner.core import best
+    from threat_planner.core.methods import best
     from threat_planner.core.planner import plan, PlannerConfig
     monkeypatch.setattr(best, 'SLOPE_SCREEN_ROUNDS', 2)
     sc = load_scenario(DATA / 'strongweak_0.yaml')
     result = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.5))
     assert np.isfinite(result.cost.J) and result.feasible
-    from threat_planner.core.kernels import path_cost
+    from threat_planner.core.cost.kernels import path_cost
     line = np.vstack([sc.start, sc.goal])
     assert path_cost(line, sc.threats.positions, sc.threats.intensities, 0.5).J == np.inf
 
@@ -153,7 +155,7 @@ def test_a_seed_through_a_threat_never_wins(monkeypatch):
 def test_the_slope_screening_leaves_out_only_seeds_that_cannot_rank_in_the_first_two(
         monkeypatch):
     """Box-only optima whose J is past the second-best held J: the top two are unchanged."""
-    from threat_planner.core import best
+    from threat_planner.core.methods import best
     from threat_planner.core.planner import plan, PlannerConfig
     seen = {}
     real = best._slope_screening
@@ -183,7 +185,7 @@ def test_the_slope_screening_leaves_out_only_seeds_that_cannot_rank_in_the_first
 
 def test_a_shortcut_refine_that_ends_infeasible_is_redone_the_long_way(monkeypatch):
     """box_broken skips the box-only run; if that leaves the limits broken, refine again."""
-    from threat_planner.core import best
+    from threat_planner.core.methods import best
     calls = []
 
     def fake(p, start, seq, name, box_broken=False, gate=None):
@@ -200,7 +202,7 @@ def test_a_shortcut_refine_that_ends_infeasible_is_redone_the_long_way(monkeypat
 
 
 def _rules_problem(name, **limits):
-    from threat_planner.core.limits import FlightLimits
+    from threat_planner.core.optimise.limits import FlightLimits
     sc = load_scenario(DATA / f'{name}.yaml')
     lim = FlightLimits(**{'max_climb_deg': 30.0, 'max_dive_deg': 30.0,
                           'min_turn_radius_m': 10.0, **limits})
@@ -208,7 +210,7 @@ def _rules_problem(name, **limits):
 
 
 def test_crowded_fields_without_limits_count_every_threat_and_others_keep_cut_offs():
-    from threat_planner.core.best import _counts_far_threats, _optimiser_cutoff
+    from threat_planner.core.methods.best import _counts_far_threats, _optimiser_cutoff
     off = {'max_climb_deg': 90.0, 'max_dive_deg': 90.0, 'min_turn_radius_m': 0.0}
     crowded_off = _rules_problem('big300_0', **off)
     assert _counts_far_threats(crowded_off)
@@ -224,7 +226,7 @@ def test_crowded_fields_without_limits_count_every_threat_and_others_keep_cut_of
 
 
 def test_surface_routes_cost_the_lattice_exactly_up_to_the_pairs_allowed(monkeypatch):
-    import threat_planner.core.seeds as seeds
+    import threat_planner.core.network.seeds as seeds
     sc = load_scenario(DATA / 'big300_0.yaml')
     radii = []
     real = seeds.segment_costs
@@ -239,7 +241,7 @@ def test_surface_routes_cost_the_lattice_exactly_up_to_the_pairs_allowed(monkeyp
     assert radii[0] is None and radii[1] == pytest.approx(
         seeds.CUTOFF_SPACINGS * sc.threats.typical_spacing(sc.box))
     # Each is the least-J route of its own lattice costs: the exact one's J is no higher.
-    from threat_planner.core.cost import path_cost
+    from threat_planner.core.cost.closed_form import path_cost
     j = [path_cost(r[0], sc.threats.positions, sc.threats.intensities, 0.5).J
          for r in (exact, cut)]
     assert j[0] <= j[1] * (1 + 1e-12)
@@ -251,9 +253,9 @@ def test_a_candidate_stalled_short_of_a_limit_gets_rounds_again_and_wins(monkeyp
     # won. Whether they stall there moves with rounding (a 1 nm move of the threats, or
     # another CPU, and they do not), so the stall is made here: the best basin's rounds
     # start at a penalty too weak to enforce anything.
-    import threat_planner.core.best as best
+    import threat_planner.core.methods.best as best
     from threat_planner.core.planner import plan, PlannerConfig
-    from threat_planner.core.threats import ThreatField
+    from threat_planner.core.world.threats import ThreatField
     rng = np.random.default_rng([6, 300, 77])
     threats = ThreatField.from_arrays(rng.uniform(50.0, 950.0, (300, 3)),
                                       rng.uniform(1e9, 4e9, 300))
@@ -281,9 +283,9 @@ def test_each_rescue_run_starts_at_a_higher_penalty_until_it_meets_the_limits(mo
     # for J run after run; each run now starts RESCUE_GROWTH times higher. Here the first
     # two runs are made to come back stalled, as they did on the measured field.
     import dataclasses
-    import threat_planner.core.best as best
-    from threat_planner.core.limits import LimitCheck
-    from threat_planner.core.optimisation import PENALTY_START
+    import threat_planner.core.methods.best as best
+    from threat_planner.core.optimise.limits import LimitCheck
+    from threat_planner.core.optimise.optimisation import PENALTY_START
     from threat_planner.core.planner import plan, PlannerConfig
     sc = load_scenario(DATA / 'uniform20_0.yaml')
     real, seen, first = best.refine, [], []
@@ -310,9 +312,9 @@ def test_without_limits_the_best_surface_route_is_refined_when_a_network_route_w
         monkeypatch):
     # bench/run_random_fields.py's field n120 seed 2: a lattice route ranked second by its
     # zigzag J refined 4 % below the winning network route.
-    import threat_planner.core.best as best
+    import threat_planner.core.methods.best as best
     from threat_planner.core.planner import plan, PlannerConfig
-    from threat_planner.core.threats import ThreatField
+    from threat_planner.core.world.threats import ThreatField
     n, side = 120, 100.0 * 6.0 ** (1.0 / 3.0)
     rng = np.random.default_rng([102, n])
     positions, intensities = rng.uniform(0.0, side, (n, 3)), rng.uniform(1e5, 4e5, n)

@@ -16,10 +16,10 @@ from sensor_msgs.msg import PointCloud2
 
 from node_harness import (cloud, domain_id, info, planner_command, REPO, RosClient,
                           start_process, stop_process)
-from threat_planner.core.config import PlannerConfig
-from threat_planner.core.cost import path_cost
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.inputs.config import PlannerConfig
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan
-from threat_planner.core.scenario import load_scenario
 from threat_planner.ros.conversions import path_from_msg
 
 SCENARIO = load_scenario(REPO / 'test' / 'data' / 'uniform20_0.yaml')

@@ -30,8 +30,8 @@ from sensor_msgs.msg import CameraInfo, PointCloud2, PointField
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray, UVCoordinate
 
-from threat_planner.bag.cdr import CdrLayout, canonical_cdr, parse_definition
 from threat_planner.bag import McapRecorder, message_definition, message_type_name
+from threat_planner.bag.cdr import CdrLayout, canonical_cdr, parse_definition
 from threat_planner.errors import RecordingError
 
 REPO = Path(__file__).resolve().parents[1]

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from node_harness import domain_id, info, REPO, ros_env, RosClient, stop_process
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.ros.conversions import path_from_msg
-from threat_planner.core.scenario import load_scenario
 
 DOMAIN = domain_id(46)
 COLCON = Path(sys.executable).with_name('colcon')

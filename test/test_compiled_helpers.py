@@ -5,8 +5,8 @@ import pytest
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from threat_planner.core.graph_kernels import Graph
-from threat_planner.core.smoothing import resample
+from threat_planner.core.network.graph_kernels import Graph
+from threat_planner.core.optimise.smoothing import resample
 
 
 def _random_graph(rng, n, e):
@@ -88,7 +88,7 @@ def test_the_kernel_cache_is_named_by_every_compiled_module():
 
     import numba
 
-    import threat_planner.core.kernels  # noqa: F401 - configures the cache
+    import threat_planner.core.cost.kernels  # noqa: F401 - configures the cache
     from threat_planner.core import _numba_cache
 
     core = Path(_numba_cache.__file__).parent

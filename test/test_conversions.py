@@ -13,8 +13,8 @@ from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from threat_planner.ros import conversions as conv
 from threat_planner.errors import InputError
+from threat_planner.ros import conversions as conv
 
 FRAME = 'map'
 STAMP = Time(sec=12, nanosec=345)

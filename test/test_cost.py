@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from threat_planner.core.cost import (cost_and_gradient, pair_threat_costs, path_cost,
-                                      segment_integrals, segment_threat_costs)
+from threat_planner.core.cost.closed_form import (cost_and_gradient, pair_threat_costs, path_cost,
+                                                  segment_integrals, segment_threat_costs)
 
 
 def _quad_integral(a, b, p):

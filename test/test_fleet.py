@@ -5,7 +5,7 @@ from sensor_msgs.msg import PointCloud2
 
 from node_harness import (cloud, domain_id, info, planner_command, PYTHON, REPO, RosClient,
                           start_process, stop_process)
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.inputs.scenario import load_scenario
 
 DOMAIN = domain_id(55)
 SCENARIO = load_scenario(REPO / 'test' / 'data' / 'uniform20_0.yaml')

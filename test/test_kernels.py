@@ -4,16 +4,16 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from threat_planner.core.cost import (cost_and_gradient, pair_threat_costs, path_cost,
-                                      segment_threat_costs)
-from threat_planner.core.kernels import (_FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS,
-                                         cost_gradient, path_cost as compiled_path_cost,
-                                         segment_costs)
-from threat_planner.core.lbfgs import _objective, _tri_solve, minimise
-from threat_planner.core.limit_kernels import LimitTerm, measure
-from threat_planner.core.limits import climb_angles, FlightLimits, turn_radii
-from threat_planner.core.near_kernels import near_segment_costs
-from threat_planner.core.threats import ThreatField
+from threat_planner.core.cost.closed_form import (cost_and_gradient, pair_threat_costs, path_cost,
+                                                  segment_threat_costs)
+from threat_planner.core.cost.kernels import (_FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS,
+                                              cost_gradient, path_cost as compiled_path_cost,
+                                              segment_costs)
+from threat_planner.core.cost.near_kernels import near_segment_costs
+from threat_planner.core.optimise.lbfgs import _objective, _tri_solve, minimise
+from threat_planner.core.optimise.limit_kernels import LimitTerm, measure
+from threat_planner.core.optimise.limits import climb_angles, FlightLimits, turn_radii
+from threat_planner.core.world.threats import ThreatField
 
 
 def _segments(rng, n=300):

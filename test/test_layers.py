@@ -13,7 +13,7 @@ ROS_FREE = [
     'threat_planner',
     'threat_planner.core',
     'threat_planner.core.planner',
-    'threat_planner.core.scenario',
+    'threat_planner.core.inputs.scenario',
     'threat_planner.cli',
     'threat_planner.cli.main',
 ]
@@ -65,3 +65,128 @@ def test_no_module_is_over_450_lines():
     sizes = {str(f.relative_to(ROOT)): len(f.read_text().splitlines())
              for f in (ROOT / 'threat_planner').rglob('*.py')}
     assert {f: n for f, n in sizes.items() if n > 450} == {}
+
+
+# ---- the import graph: no circle, and no arrow back up a layer ------------------------
+
+#: Layers, lowest first: a module may import its own layer's and lower layers' modules.
+LAYERS = ('core', 'bag', 'ros', 'cli')
+#: Inside core, lowest first; one rank may hold several folders that must not import
+#: one another ('' is the core package's own modules: planner, result).
+CORE_RANKS = (('_numba_cache',), ('world',), ('inputs', 'cost'), ('network', 'optimise'),
+              ('methods',), ('',))
+
+
+def import_graph(package: Path) -> dict[str, set[str]]:
+    """Return module -> the project's modules it imports (anywhere in its body).
+
+    ``from pkg import name`` counts as importing ``pkg.name`` where that is a module and
+    ``pkg`` otherwise; a module's own parent packages (run by Python first) do not count.
+    """
+    import ast
+    base = package.parent
+    mods = {}
+    for f in package.rglob('*.py'):
+        parts = f.relative_to(base).with_suffix('').parts
+        mods['.'.join(parts[:-1] if parts[-1] == '__init__' else parts)] = f
+    graph = {}
+    for name, f in mods.items():
+        out = set()
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                targets = [node.module + '.' + a.name if node.module + '.' + a.name in mods
+                           else node.module for a in node.names]
+            else:
+                continue
+            for t in targets:
+                while t not in mods and '.' in t:
+                    t = t.rsplit('.', 1)[0]
+                if t in mods and t != name and not name.startswith(t + '.'):
+                    out.add(t)
+        graph[name] = out
+    return graph
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Return the strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def place(module: str) -> tuple[int, int, str] | None:
+    """(layer, rank in core, folder) of a module; None for the package root and errors."""
+    parts = module.split('.')[1:]
+    if not parts or parts[0] not in LAYERS:
+        return None
+    if parts[0] != 'core':
+        return LAYERS.index(parts[0]), 0, parts[0]
+    folder = parts[1] if len(parts) > 1 and any(parts[1] in r for r in CORE_RANKS) else ''
+    return 0, next(i for i, r in enumerate(CORE_RANKS) if folder in r), folder
+
+
+def upward_arrows(graph: dict[str, set[str]]) -> list[str]:
+    """Every import from a lower layer or rank to a higher or sideways one."""
+    bad = []
+    for a, targets in graph.items():
+        pa = place(a)
+        for b in targets:
+            pb = place(b)
+            if pa is None or pb is None or pa[2] == pb[2] and pa[0] == pb[0]:
+                continue
+            if pb[:2] >= pa[:2]:
+                bad.append(f'{a} -> {b}')
+    return sorted(bad)
+
+
+GRAPH = import_graph(ROOT / 'threat_planner')
+
+
+def test_no_import_circle():
+    assert circles(GRAPH) == []
+
+
+def test_no_import_runs_back_up_a_layer():
+    assert upward_arrows(GRAPH) == []
+
+
+def test_the_graph_checks_can_fail():
+    """A planted circle and a planted upward arrow are both seen."""
+    g = {k: set(v) for k, v in GRAPH.items()}
+    g['threat_planner.core.world.threats'].add('threat_planner.core.planner')
+    assert any('threat_planner.core.world.threats' in c for c in circles(g))
+    assert 'threat_planner.core.world.threats -> threat_planner.core.planner' in \
+        upward_arrows(g)
+    assert upward_arrows({'threat_planner.bag.writer': {'threat_planner.ros.node'},
+                          'threat_planner.core.cost.kernels':
+                          {'threat_planner.core.inputs.config'}}) == [
+        'threat_planner.bag.writer -> threat_planner.ros.node',
+        'threat_planner.core.cost.kernels -> threat_planner.core.inputs.config']
+    # the walk reads imports inside functions too (cli.main loads ROS only when asked)
+    assert 'threat_planner.ros.recording.record' in GRAPH['threat_planner.cli.main']

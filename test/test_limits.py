@@ -6,10 +6,10 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
-from threat_planner.core.limits import (check_limits, climb_angles, constraint_jacobian,
-                                        constraint_values, constraint_vjp, FlightLimits,
-                                        turn_radii)
-from threat_planner.core.limit_kernels import LimitTerm
+from threat_planner.core.optimise.limit_kernels import LimitTerm
+from threat_planner.core.optimise.limits import (check_limits, climb_angles, constraint_jacobian,
+                                                 constraint_values, constraint_vjp, FlightLimits,
+                                                 turn_radii)
 
 ALL_ON = FlightLimits(20.0, 30.0, 15.0, 0.0)
 

@@ -12,7 +12,7 @@ DATA = Path(__file__).parent / 'data'
 def test_live_demo_prints_replans_and_writes_the_last_figure(tmp_path):
     figure = tmp_path / 'last.png'
     p = subprocess.run(
-        [sys.executable, '-m', 'threat_planner.ros.demo', '--scenario',
+        [sys.executable, '-m', 'threat_planner.cli.demo', '--scenario',
          str(DATA / 'uniform20_0.yaml'), '--method', 'paper', '--rate', '2', '--drift', '2',
          '--duration', '12', '--figure', str(figure)],
         env=ros_env(domain_id(31)), capture_output=True, text=True, timeout=90)

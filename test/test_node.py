@@ -25,15 +25,15 @@ import yaml
 
 from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON, REPO, RosClient,
                           start_process, stop_process, VOLATILE)
-from threat_planner.ros.conversions import (path_from_msg, stamp_to_ns, threats_from_pointcloud2)
-from threat_planner.errors import InputError
-from threat_planner.core.planner import plan, PlannerConfig
-from threat_planner.ros.parameters import PARAMETER_DEFAULTS, settings_from_parameters
-from threat_planner.ros.worker import PlanWorker
 from threat_planner.bag import read_messages
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.planner import plan, PlannerConfig
+from threat_planner.core.world.threats import ThreatField
+from threat_planner.errors import InputError
+from threat_planner.ros.conversions import path_from_msg, stamp_to_ns, threats_from_pointcloud2
+from threat_planner.ros.parameters import PARAMETER_DEFAULTS, settings_from_parameters
 from threat_planner.ros.publisher import ThreatDrift
-from threat_planner.core.threats import ThreatField
+from threat_planner.ros.worker import PlanWorker
 
 DOMAIN = domain_id(1)
 SCENARIO_FILE = REPO / 'test' / 'data' / 'uniform20_0.yaml'

@@ -20,12 +20,12 @@ import yaml
 
 from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON, REPO,
                           ros_env, RosClient, start_process, stop_process, VOLATILE)
-from threat_planner.bag.bagfile import load_bag
-from threat_planner.bag.replay import replay_bag
-from threat_planner.core.airspace import Airspace, make_zone
-from threat_planner.core.terrain import Terrain
+from threat_planner.core.world.airspace import Airspace, make_zone
+from threat_planner.core.world.terrain import Terrain
 from threat_planner.ros.conversions import (image_from_terrain, path_from_msg, stamp_to_ns,
                                             zones_to_markers)
+from threat_planner.ros.recording.bagfile import load_bag
+from threat_planner.ros.recording.replay import replay_bag
 
 DOMAIN = domain_id(45)
 NS = '/air'

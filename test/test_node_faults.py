@@ -26,7 +26,7 @@ sys.path.insert(0, str(REPO / 'bench'))
 import faults  # noqa: E402
 import flood  # noqa: E402
 
-from threat_planner.core.scenario import load_scenario  # noqa: E402
+from threat_planner.core.inputs.scenario import load_scenario  # noqa: E402
 
 DOMAIN = domain_id(26)
 SMALL = load_scenario(REPO / 'test' / 'data' / 'uniform20_0.yaml')

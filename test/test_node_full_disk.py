@@ -16,7 +16,7 @@ from node_harness import (domain_id, info, planner_command, PlannerNode, REPO, R
                           start_process, stop_process)
 from test_recording_full_disk import fill, small_disk
 from threat_planner.bag import read_messages
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.inputs.scenario import load_scenario
 
 
 DOMAIN = domain_id(41)

@@ -54,13 +54,13 @@ from sensor_msgs.msg import PointCloud2, PointField
 
 from node_harness import (domain_id, info, planner_command, pose, RosClient, start_process,
                           stop_process, VOLATILE)
+from threat_planner.bag import read_messages
+from threat_planner.core.planner import check_endpoints, plan
+from threat_planner.core.world.threats import ThreatField
+from threat_planner.errors import InputError
 from threat_planner.ros.conversions import (path_from_msg, point_from_pose_stamped, stamp_to_ns,
                                             threats_from_pointcloud2, threats_from_pose_array)
-from threat_planner.errors import InputError
-from threat_planner.core.planner import check_endpoints, plan
 from threat_planner.ros.parameters import PARAMETER_DEFAULTS, settings_from_parameters
-from threat_planner.bag import read_messages
-from threat_planner.core.threats import ThreatField
 
 DOMAIN = domain_id(16)
 NS = '/fuzz'

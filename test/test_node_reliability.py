@@ -3,7 +3,7 @@
 * every parameter has one type, from its setting: a value of another type (``bounds`` as
   strings, an integer for a double) is refused with the reason at run time, and an
   integer array for ``bounds`` on the command line stops the node with one line;
-* inputs with coordinates beyond the limit of :mod:`threat_planner.core.threats` are
+* inputs with coordinates beyond the limit of :mod:`threat_planner.core.world.threats` are
   refused naming the limit, not as an unreachable goal;
 * a ``frame_id`` change drops the threat picture of the old frame and says so.
 """
@@ -17,9 +17,9 @@ from rcl_interfaces.msg import ParameterType
 
 from node_harness import (cloud, domain_id, info, planner_command, PlannerNode, pose, REPO,
                           RosClient, start_process, stop_process)
-from threat_planner.core.scenario import load_scenario
-from threat_planner.core.settings import NODE_SETTINGS
-from threat_planner.core.threats import as_point, COORDINATE_LIMIT_M, ThreatField
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.inputs.settings import NODE_SETTINGS
+from threat_planner.core.world.threats import as_point, COORDINATE_LIMIT_M, ThreatField
 from threat_planner.errors import InputError
 from threat_planner.ros.parameters import descriptor
 

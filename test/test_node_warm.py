@@ -1,7 +1,7 @@
 """Warm replanning in the node: a small change replans from the previous path (issue 13).
 
 The node's plan process keeps its last plan; after the threats move by much less than 1 %
-of the box it replans warm (core/warm.py decides), says so in ``plan_info`` (``start``),
+of the box it replans warm (core/methods/warm.py decides), says so in ``plan_info`` (``start``),
 and is no worse than a cold plan of the same picture. Replay of the node's recording
 re-plans the warm plan warm too, and reproduces it.
 """
@@ -14,12 +14,12 @@ from sensor_msgs.msg import PointCloud2
 
 from node_harness import (cloud, domain_id, info, planner_command, REPO, RosClient,
                           start_process, stop_process)
-from threat_planner.bag.bagfile import load_bag
-from threat_planner.bag.replay import replay_bag
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan
-from threat_planner.core.scenario import load_scenario
-from threat_planner.core.threats import ThreatField
+from threat_planner.core.world.threats import ThreatField
 from threat_planner.ros.conversions import threats_from_pointcloud2
+from threat_planner.ros.recording.bagfile import load_bag
+from threat_planner.ros.recording.replay import replay_bag
 
 SCENARIO = load_scenario(REPO / 'test' / 'data' / 'weak20_0.yaml')
 

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from threat_planner.core.cost import path_cost
-from threat_planner.core.kernels import _FROZEN_C2, _FROZEN_C3
-from threat_planner.core.lbfgs import minimise, objective_scale
-from threat_planner.core.limits import check_limits, FlightLimits
-from threat_planner.core.optimisation import minimise_cost
-from threat_planner.core.smoothing import resample
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.cost.kernels import _FROZEN_C2, _FROZEN_C3
+from threat_planner.core.optimise.lbfgs import minimise, objective_scale
+from threat_planner.core.optimise.limits import check_limits, FlightLimits
+from threat_planner.core.optimise.optimisation import minimise_cost
+from threat_planner.core.optimise.smoothing import resample
+from threat_planner.core.world.threats import Box, ThreatField
 
 
 @pytest.fixture
@@ -73,8 +73,8 @@ def test_a_gate_sees_every_coarser_level_and_stops_where_it_says(problem):
 
 def test_prolongation_keeps_a_coarse_arc_s_turn_radius_where_linear_halves_it():
     """Into the finest level: subdivision spreads each turn, interpolation concentrates it."""
-    from threat_planner.core.limit_kernels import measure
-    from threat_planner.core.optimisation import _prolong
+    from threat_planner.core.optimise.limit_kernels import measure
+    from threat_planner.core.optimise.optimisation import _prolong
     radius = 30.0
     a = np.linspace(0.0, np.pi / 2, 11)
     coarse = np.stack([radius * np.cos(a), radius * np.sin(a), 2.0 * a], axis=1)
@@ -93,7 +93,7 @@ def test_prolongation_keeps_a_coarse_arc_s_turn_radius_where_linear_halves_it():
 
 def test_the_constrained_answer_is_the_least_j_feasible_round(problem):
     """Every round's J is traced; the one returned is the least feasible of them."""
-    from threat_planner.core import optimisation as opt
+    from threat_planner.core.optimise import optimisation as opt
     threats, box, start, goal = problem
     limits = FlightLimits(8.0, 8.0, 40.0, 0.0)
     x0 = resample(np.vstack([start, [60.0, 40.0, 65.0], goal]), 20)
@@ -113,8 +113,8 @@ def test_the_constrained_answer_is_the_least_j_feasible_round(problem):
 
 def _reference_rounds(level, x, lam, mu, maxiter, rounds, gain):
     """The rounds as they ran in Python before they were compiled (for the cross-check)."""
-    from threat_planner.core import optimisation as opt
-    from threat_planner.core.limit_kernels import LimitTerm
+    from threat_planner.core.optimise import optimisation as opt
+    from threat_planner.core.optimise.limit_kernels import LimitTerm
     x = level.clip(x)
     level.pick_pairs(x)
     even = opt.EVEN_SPACING_WEIGHT * level.spring_unit
@@ -157,7 +157,7 @@ def _reference_rounds(level, x, lam, mu, maxiter, rounds, gain):
 def test_compiled_rounds_run_as_the_python_loop_bit_for_bit(cutoff, gain):
     """Same iterates, multipliers and answer as the loop in Python, with and without a
     cut-off whose pairs are picked again on the way."""
-    from threat_planner.core import optimisation as opt
+    from threat_planner.core.optimise import optimisation as opt
     rng = np.random.default_rng(11)
     threats = ThreatField.from_arrays(rng.uniform(10, 90, (25, 3)), rng.uniform(2e4, 2e5, 25))
     box = Box.from_corners([0, 0, 0], [100, 100, 100])
@@ -183,7 +183,7 @@ def test_compiled_rounds_run_as_the_python_loop_bit_for_bit(cutoff, gain):
 
 def test_a_known_broken_box_optimum_goes_straight_to_the_rounds(problem, monkeypatch):
     """box_broken: no box-only run, and still a feasible answer below the start's J."""
-    from threat_planner.core import optimisation as opt
+    from threat_planner.core.optimise import optimisation as opt
     threats, box, start, goal = problem
     limits = FlightLimits(8.0, 8.0, 20.0, 0.0)
     x0 = resample(np.vstack([start, [60.0, 40.0, 55.0], goal]), 20)
@@ -203,8 +203,8 @@ def test_a_known_broken_box_optimum_goes_straight_to_the_rounds(problem, monkeyp
 def test_the_hot_loop_s_feasibility_is_check_limits_verdict():
     """meets_limits and the compiled rounds' check say what check_limits(...).feasible
     says, near every limit."""
-    from threat_planner.core.lagrangian_kernels import _meets
-    from threat_planner.core.limits import meets_limits
+    from threat_planner.core.optimise.lagrangian_kernels import _meets
+    from threat_planner.core.optimise.limits import meets_limits
     rng = np.random.default_rng(3)
     limits = FlightLimits(20.0, 25.0, 15.0, 5.0)
     verdicts = set()
@@ -229,7 +229,7 @@ def test_the_hot_loop_s_feasibility_is_check_limits_verdict():
 def test_constrained_only_runs_the_rounds_at_the_start_s_resolution(problem, monkeypatch):
     """A warm start: no box-only run and no coarser level, whether or not it meets the
     limits; where it does not, the answer still does."""
-    from threat_planner.core import optimisation as opt
+    from threat_planner.core.optimise import optimisation as opt
     threats, box, start, goal = problem
     limits = FlightLimits(8.0, 8.0, 20.0, 0.0)
     calls = []

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 import yaml
 
-from threat_planner.core.cost import path_cost
-from threat_planner.core.partition import build_network, paper_network
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.network.partition import build_network, paper_network
+from threat_planner.core.network.search import nearest_nodes, spread_nodes
+from threat_planner.core.network.seeds import surface_lattice, surface_routes
 from threat_planner.core.planner import plan, PlannerConfig
-from threat_planner.core.scenario import load_scenario
-from threat_planner.core.search import nearest_nodes, spread_nodes
-from threat_planner.core.seeds import surface_lattice, surface_routes
-from threat_planner.core.threats import Box
+from threat_planner.core.world.threats import Box
 from threat_planner.errors import PlanningError
 
 DATA = Path(__file__).parent / 'data'

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from threat_planner.core.partition import (bare_network, box_surface_points, build_network,
-                                           incentres, merge_duplicates)
-from threat_planner.core.threats import Box
+from threat_planner.core.network.partition import (bare_network, box_surface_points, build_network,
+                                                   incentres, merge_duplicates)
+from threat_planner.core.world.threats import Box
 
 BOX = Box.from_corners([0, 0, 0], [100, 100, 100])
 

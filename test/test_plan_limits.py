@@ -6,15 +6,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from threat_planner.core.config import PlannerConfig as Config
-from threat_planner.core.limits import check_limits, FlightLimits
-from threat_planner.core.best import repair
-from threat_planner.core.problem import Candidate, Clock, Problem
+from threat_planner.core.inputs.config import PlannerConfig as Config
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.inputs.settings import PHYSICAL_LIMITS
+from threat_planner.core.methods.best import repair
+from threat_planner.core.methods.problem import Candidate, Clock, Problem
+from threat_planner.core.optimise.limits import check_limits, FlightLimits
+from threat_planner.core.optimise.smoothing import check_angles
 from threat_planner.core.planner import plan, PlannerConfig
-from threat_planner.core.scenario import load_scenario
-from threat_planner.core.settings import PHYSICAL_LIMITS
-from threat_planner.core.smoothing import check_angles
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.world.threats import Box, ThreatField
 from threat_planner.errors import InputError
 
 DATA = 'test/data/'
@@ -158,7 +158,7 @@ def _bench_tools():
 def test_a_warm_start_that_breaks_a_limit_refines_at_full_resolution_no_worse_than_cold():
     """The speed bench's uniform20_0 at w 0.5: the previous path from the new start,
     resampled, breaks a limit; the warm replan still ends at or below the cold plan."""
-    from threat_planner.core.warm import warm_path
+    from threat_planner.core.methods.warm import warm_path
     sc = load_scenario(DATA + 'uniform20_0.yaml')
     cfg = PlannerConfig(w=0.5)
     first = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)

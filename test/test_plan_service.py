@@ -10,8 +10,8 @@ from sensor_msgs.msg import PointCloud2
 
 from node_harness import (cloud, domain_id, info, planner_command, pose, REPO, RosClient,
                           start_process, stop_process)
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan
-from threat_planner.core.scenario import load_scenario
 from threat_planner.ros.conversions import path_from_msg
 from threat_planner.ros.parameters import PARAMETER_DEFAULTS, settings_from_parameters
 

@@ -8,8 +8,8 @@ import yaml
 
 from node_harness import (cloud, domain_id, planner_command, pose, REPO, RosClient,
                           start_process, stop_process)
-from threat_planner.core.airspace import Airspace
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.world.airspace import Airspace
 from threat_planner.ros.conversions import path_from_msg
 
 SCENARIO = load_scenario(REPO / 'test' / 'data' / 'uniform20_0.yaml')

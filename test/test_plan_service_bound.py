@@ -12,7 +12,7 @@ from sensor_msgs.msg import PointCloud2
 
 from node_harness import (cloud, domain_id, planner_command, pose, REPO, RosClient,
                           start_process, stop_process)
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.ros.plan_service import QUEUE_BOUND
 
 SCENARIO = load_scenario(REPO / 'test' / 'data' / 'uniform20_0.yaml')

@@ -6,12 +6,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from threat_planner.core.cost import path_cost
-from threat_planner.errors import InputError
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.inputs.settings import NO_LIMITS
 from threat_planner.core.planner import K_SWEEP, plan, PlannerConfig
-from threat_planner.core.scenario import load_scenario
-from threat_planner.core.settings import NO_LIMITS
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.world.threats import Box, ThreatField
+from threat_planner.errors import InputError
 
 DATA = Path(__file__).parent / 'data'
 REFERENCE = json.loads((DATA / 'reference.json').read_text())
@@ -141,7 +141,7 @@ _FIRST_PLANS = r'''
 import sys, threading
 import numpy as np
 from threat_planner.core import planner
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.world.threats import Box, ThreatField
 rng = np.random.default_rng(8)
 n = int(sys.argv[1])
 side = 100 * (n / 20) ** (1 / 3)

@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 import yaml
 
-from threat_planner.core.cost import CONTACT_DISTANCE, path_cost, segment_threat_costs
-from threat_planner.errors import ScenarioError, ThreatPlannerError
-from threat_planner.core.partition import build_network
+from threat_planner.core.cost.closed_form import CONTACT_DISTANCE, path_cost, segment_threat_costs
+from threat_planner.core.inputs.scenario import load_scenario, scenario_from_dict
+from threat_planner.core.network.partition import build_network
 from threat_planner.core.planner import plan, PlannerConfig
-from threat_planner.core.scenario import load_scenario, scenario_from_dict
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.world.threats import Box, ThreatField
+from threat_planner.errors import ScenarioError, ThreatPlannerError
 
 #: Wall-time limit of one library call [s]; generous for a busy 2-core CI machine.
 CALL_TIMEOUT_S = 20

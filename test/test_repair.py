@@ -16,7 +16,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 import yaml
 
-from threat_planner.bag import (LATCHED_QOS, McapRecorder, read_messages, read_ros_messages)
+from threat_planner.bag import LATCHED_QOS, McapRecorder, read_messages, read_ros_messages
 from threat_planner.bag.repair import default_target, repair_recording
 from threat_planner.errors import RecordingError
 

@@ -23,10 +23,10 @@ from sensor_msgs.msg import PointCloud2
 
 from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON, REPO, ros_env,
                           RosClient, start_process, stop_process, VOLATILE)
-from threat_planner.errors import RecordingError
 from threat_planner.bag import McapRecorder, read_messages
-from threat_planner.bag.replay import load_bag, replay_bag
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.errors import RecordingError
+from threat_planner.ros.recording.replay import load_bag, replay_bag
 
 DOMAIN = domain_id(86, span=3)
 DATA = REPO / 'test' / 'data'

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import yaml
 
+from threat_planner.core.inputs.scenario import load_scenario, scenario_from_dict
 from threat_planner.errors import ScenarioError
-from threat_planner.core.scenario import load_scenario, scenario_from_dict
 
 DATA = Path(__file__).parent / 'data'
 

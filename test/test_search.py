@@ -4,10 +4,11 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from threat_planner.core.partition import build_network
-from threat_planner.core.search import (alternative_routes, dijkstra_pairs,
-                                        dijkstra_with_terminals, edge_threat_costs, nearest_nodes)
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.network.partition import build_network
+from threat_planner.core.network.search import (alternative_routes, dijkstra_pairs,
+                                                dijkstra_with_terminals, edge_threat_costs,
+                                                nearest_nodes)
+from threat_planner.core.world.threats import Box, ThreatField
 
 BOX = Box.from_corners([0, 0, 0], [100, 100, 100])
 

@@ -6,9 +6,9 @@ from pathlib import Path
 import pytest
 
 from threat_planner.cli import build_parser
-from threat_planner.core.config import PlannerConfig
-from threat_planner.core.settings import (NODE_SETTINGS, params_file_text, PLANNER_SETTINGS,
-                                          SETTINGS)
+from threat_planner.core.inputs.config import PlannerConfig
+from threat_planner.core.inputs.settings import (NODE_SETTINGS, params_file_text, PLANNER_SETTINGS,
+                                                 SETTINGS)
 from threat_planner.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,7 +29,8 @@ def test_every_setting_is_declared_once_with_help():
 
 def test_params_file_is_generated_from_the_settings():
     """config/planner.yaml holds every node default with its help (regenerate on change:
-    python -c 'from threat_planner.core.settings import params_file_text as t; print(t(), end="")'
+    python -c 'from threat_planner.core.inputs.settings import params_file_text as t;
+    print(t(), end="")'
     > config/planner.yaml)."""
     assert (ROOT / 'config' / 'planner.yaml').read_text() == params_file_text()
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from threat_planner.core.smoothing import (chain_forces, check_angles, pitch_angles, resample,
-                                           smooth, turn_angles)
+from threat_planner.core.optimise.smoothing import (chain_forces, check_angles, pitch_angles,
+                                                    resample, smooth, turn_angles)
 
 
 def test_resample_gives_equal_steps_and_keeps_the_ends():
@@ -97,7 +97,7 @@ def _reference_smooth(points, positions, intensities, k, damping, mass, q, steps
 def test_compiled_forces_and_steps_are_the_numpy_chain(walls):
     # The compiled integration (chain_kernels) against chain_forces and the numpy step:
     # the same to rounding (numpy's power and einsum round some results differently).
-    from threat_planner.core.chain_kernels import _forces
+    from threat_planner.core.optimise.chain_kernels import _forces
     rng = np.random.default_rng(4)
     for trial in range(20):
         n, m = int(rng.integers(4, 30)), int(rng.integers(0, 25))

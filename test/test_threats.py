@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from threat_planner.core.world.threats import as_point, Box, ThreatField
 from threat_planner.errors import InputError
-from threat_planner.core.threats import as_point, Box, ThreatField
 
 
 def test_received_power_follows_the_radar_equation():

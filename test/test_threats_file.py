@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.errors import ScenarioError
 
 DATA = Path(__file__).parent / 'data'
@@ -108,7 +108,7 @@ def test_cli_plans_a_split_scenario_and_reports_a_missing_table_in_one_line(tmp_
 
 @pytest.mark.parametrize('threats_file', [None, 'big.npy', 'big.csv'])
 def test_save_scenario_round_trip(tmp_path, threats_file):
-    from threat_planner.core.scenario import save_scenario
+    from threat_planner.core.inputs.scenario import save_scenario
     sc = load_scenario(DATA / 'clustered_0.yaml')
     save_scenario(sc, tmp_path / 'out.yaml', threats_file)
     back = load_scenario(tmp_path / 'out.yaml')
@@ -120,7 +120,7 @@ def test_save_scenario_round_trip(tmp_path, threats_file):
 
 
 def test_save_scenario_refuses_a_bad_table_name(tmp_path):
-    from threat_planner.core.scenario import save_scenario
+    from threat_planner.core.inputs.scenario import save_scenario
     from threat_planner.errors import InputError
     with pytest.raises(InputError, match='threats_file: t.json must end in .npy or .csv'):
         save_scenario(load_scenario(DATA / 'weak20_0.yaml'), tmp_path / 'o.yaml', 't.json')

@@ -7,8 +7,8 @@ from builtin_interfaces.msg import Time
 import numpy as np
 import pytest
 
-from threat_planner.core.cost import path_cost
-from threat_planner.core.scenario import load_scenario
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan
 from threat_planner.ros.outputs import PlanRequest
 from threat_planner.ros.parameters import PARAMETER_DEFAULTS, settings_from_parameters

@@ -6,8 +6,8 @@ from hypothesis import given, settings, strategies as st
 import pytest
 import yaml
 
-from threat_planner.core import yaml_threats
-from threat_planner.core.scenario import load_scenario, save_scenario
+from threat_planner.core.inputs import yaml_threats
+from threat_planner.core.inputs.scenario import load_scenario, save_scenario
 
 DATA = Path(__file__).parent / 'data'
 LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)

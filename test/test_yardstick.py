@@ -9,8 +9,8 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
-from threat_planner.core.cost import path_cost
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.cost.closed_form import path_cost
+from threat_planner.core.world.threats import Box, ThreatField
 
 BENCH = Path(__file__).resolve().parents[1] / 'bench'
 if str(BENCH) not in sys.path:

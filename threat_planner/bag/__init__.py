@@ -1,13 +1,13 @@
-"""MCAP recordings of the planner node: writing, reading, offline recording and replay.
+"""MCAP recordings of the planner node: writing, reading, repairing.
 
 Files are what ``ros2 bag record -s mcap`` (rosbag2, Jazzy) writes: header profile
 ``ros2``, one ``ros2msg`` schema per message type holding the full concatenated ``.msg``
 text, ``cdr`` channels carrying ``offered_qos_profiles``, zstd-compressed chunks. Modules:
 :mod:`.qos` (offered QoS), :mod:`.definitions` (message types and definitions),
 :mod:`.writer` (:class:`McapRecorder`), :mod:`.reader` (strict and tolerant reading),
-:mod:`.record` (a plan recorded as the node would), :mod:`.bagfile` (a node recording
-read for replay), :mod:`.replay` (re-plan and compare), :mod:`.live` (publish a recording
-to a running node).
+:mod:`.cdr` (CDR encoding), :mod:`.metadata` (rosbag2's ``metadata.yaml``), :mod:`.repair`
+(salvage a cut bag). Storage only: it imports nothing of the ROS edge; the tools that run
+it (record, replay, live) are in :mod:`threat_planner.ros.recording`.
 """
 
 from threat_planner.bag.definitions import (deserialize, get_message_class, message_definition,

@@ -34,8 +34,8 @@ from threat_planner.bag.cdr import serialize_cdr
 from threat_planner.bag.definitions import (canonical_type_name, MESSAGE_ENCODING,
                                             message_definition, message_type_name, PROFILE,
                                             SCHEMA_ENCODING, type_description_hash)
-from threat_planner.bag.metadata import (bag_information, file_entry, io_reason,
-                                         topic_entry, write_bag_metadata)
+from threat_planner.bag.metadata import (bag_information, file_entry, io_reason, topic_entry,
+                                         write_bag_metadata)
 from threat_planner.bag.qos import as_topic_qos, TopicQos
 from threat_planner.errors import RecordingError
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from threat_planner.core.zones import BoxZone, Cylinder, Sphere
+from threat_planner.core.world.zones import BoxZone, Cylinder, Sphere
 
 #: Samples per segment when shading the parts of the path no radar sees.
 SHADE_SAMPLES = 16

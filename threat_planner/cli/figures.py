@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
-from threat_planner.core.threats import Box, ThreatField  # noqa: E402
+from threat_planner.core.world.threats import Box, ThreatField  # noqa: E402
 
 
 def plot_plan(path_png: str | Path, threats: ThreatField, box: Box, start: NDArray,

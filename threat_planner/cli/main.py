@@ -16,10 +16,10 @@ import sys
 import threading
 
 from threat_planner.cli.bag import add_bag_commands
-from threat_planner.errors import ThreatPlannerError
 from threat_planner.cli.options import add_planner_options, config_from, overrides, ProgressBar
+from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan
-from threat_planner.core.scenario import load_scenario
+from threat_planner.errors import ThreatPlannerError
 
 
 class _Parser(argparse.ArgumentParser):
@@ -34,7 +34,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     cfg = config_from(args)
     progress = ProgressBar('sweep')
     if args.record:
-        from threat_planner.bag.record import record_plan
+        from threat_planner.ros.recording.record import record_plan
         result, recording = record_plan(scenario, cfg, args.record, progress=progress)
     else:
         result = plan(scenario.threats, scenario.start, scenario.goal, scenario.box, cfg,
@@ -83,8 +83,8 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from threat_planner.bag.live import play_live
-    from threat_planner.bag.replay import load_bag, replay_bag
+    from threat_planner.ros.recording.live import play_live
+    from threat_planner.ros.recording.replay import load_bag, replay_bag
     changes = overrides(args)
     bag = load_bag(args.bag, tolerant=args.tolerant)
     if args.live:

@@ -7,8 +7,8 @@ from dataclasses import replace
 import sys
 from typing import Optional
 
-from threat_planner.core.config import PlannerConfig
-from threat_planner.core.settings import PLANNER_SETTINGS, Setting
+from threat_planner.core.inputs.config import PlannerConfig
+from threat_planner.core.inputs.settings import PLANNER_SETTINGS, Setting
 
 __all__ = ['ProgressBar', 'add_planner_options', 'config_from', 'overrides']
 

@@ -13,8 +13,8 @@ from typing import Callable
 import numpy as np
 
 from threat_planner.cli.figures import plot_plan
+from threat_planner.core.inputs.scenario import Scenario
 from threat_planner.core.planner import K_SWEEP, plan, PlannerConfig
-from threat_planner.core.scenario import Scenario
 
 W_SWEEP = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9)
 

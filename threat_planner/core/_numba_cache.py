@@ -1,11 +1,12 @@
 """Where numba keeps the compiled kernels: a folder named by a hash of their sources.
 
 numba checks a cached function against its own source file only. The kernels call one
-another across files (:mod:`.lbfgs` inlines :mod:`.kernels` and :mod:`.limit_kernels`),
+another across files (:mod:`.optimise.lbfgs` inlines :mod:`.cost.kernels` and
+:mod:`.optimise.limit_kernels`),
 so after an edit or an upgrade that changed only a callee, a caller's stale machine code
 was loaded: it crashed the planner with a segmentation fault twice during development.
-Naming the cache folder by a hash of every compiled module (and of :mod:`.cost`, whose
-constants are compiled in) makes any change start a fresh cache.
+Naming the cache folder by a hash of every compiled module (and of :mod:`.cost.closed_form`,
+whose constants are compiled in) makes any change start a fresh cache.
 """
 
 from __future__ import annotations
@@ -17,9 +18,10 @@ from pathlib import Path
 import sys
 
 #: The modules compiled with ``cache=True`` and the ones whose constants they compile in.
-SOURCES = ('cost.py', 'pair_integrals.py', 'kernels.py', 'lbfgs.py', 'limit_kernels.py',
-           'near_kernels.py', 'graph_kernels.py', 'lagrangian_kernels.py', 'limits.py',
-           'chain_kernels.py')
+SOURCES = ('cost/closed_form.py', 'cost/pair_integrals.py', 'cost/kernels.py',
+           'cost/near_kernels.py', 'network/graph_kernels.py', 'optimise/lbfgs.py',
+           'optimise/limit_kernels.py', 'optimise/lagrangian_kernels.py', 'optimise/limits.py',
+           'optimise/chain_kernels.py')
 
 
 def cache_dir() -> Path:

@@ -1,7 +1,7 @@
 """Plan a path: partition, edge costs, then the chosen method, and the exact cost of it.
 
-The methods themselves are in :mod:`threat_planner.core.methods`; settings in
-:mod:`threat_planner.core.config`; the result in :mod:`threat_planner.core.result`.
+The methods themselves are in :mod:`threat_planner.core.methods.registry`; settings in
+:mod:`threat_planner.core.inputs.config`; the result in :mod:`threat_planner.core.result`.
 """
 
 from __future__ import annotations
@@ -15,42 +15,21 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import ThreadpoolController
 
-from threat_planner.core.airspace import Airspace
-from threat_planner.core.config import PlannerConfig
-from threat_planner.core.cost import Cost
-from threat_planner.core.best import refine
-from threat_planner.core.methods import K_SWEEP, METHOD_FUNCTIONS
-from threat_planner.core.problem import Candidate, Clock, Problem
-from threat_planner.core.partition import build_network, paper_network
+from threat_planner.core.cost.closed_form import Cost
+from threat_planner.core.inputs.config import PlannerConfig
+from threat_planner.core.inputs.settings import METHODS
+from threat_planner.core.methods.best import refine
+from threat_planner.core.methods.problem import Candidate, Clock, Problem
+from threat_planner.core.methods.registry import K_SWEEP, METHOD_FUNCTIONS
+from threat_planner.core.methods.warm import warm_path
+from threat_planner.core.network.partition import build_network, paper_network
+from threat_planner.core.network.search import edge_threat_costs
 from threat_planner.core.result import PlanResult
-from threat_planner.core.search import edge_threat_costs
-from threat_planner.core.settings import METHODS
-from threat_planner.core.threats import as_point, Box, ThreatField
-from threat_planner.core.warm import warm_path
+from threat_planner.core.world.airspace import Airspace
+from threat_planner.core.world.threats import Box, check_endpoints, ThreatField
 from threat_planner.errors import InputError, PlanningError
 
 __all__ = ['K_SWEEP', 'METHODS', 'PlanResult', 'PlannerConfig', 'check_endpoints', 'plan']
-
-
-def check_endpoints(start: ArrayLike, goal: ArrayLike, box: Box,
-                    threats: ThreatField) -> tuple[NDArray, NDArray]:
-    """Validate start and goal: finite, inside the box, not on a threat.
-
-    Raises:
-        InputError: naming the point and the problem.
-    """
-    out = []
-    for name, value in (('start', start), ('goal', goal)):
-        p = as_point(name, value)
-        if not box.contains(p):
-            raise InputError(f'{name}: {p.tolist()} is outside bounds '
-                             f'{box.lo.tolist()}..{box.hi.tolist()}')
-        if len(threats):
-            d, i = threats.tree.query(p)
-            if d <= 1e-9 * max(box.diagonal, 1.0):
-                raise InputError(f'{name}: {p.tolist()} is on threat {int(i)}')
-        out.append(p)
-    return out[0], out[1]
 
 
 def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
@@ -68,7 +47,7 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         box: Flight box.
         config: Planner settings.
         progress: Optional callback (done, total) for long sweeps.
-        warm_start: The previous plan; after a small change (core/warm.py states the
+        warm_start: The previous plan; after a small change (core/methods/warm.py states the
             rule) its path is refined instead of planning from scratch.
         airspace: No-fly zones and terrain to respect (method 'best' only), or None.
         on_initial: Optional callback (points (M, 3) [m], exact Cost) with the network
@@ -153,7 +132,7 @@ def _tiny_plan() -> None:
 
     16 threats: enough for the surface lattice's costs to run in parallel, as in a big plan.
     """
-    from threat_planner.core.near_kernels import near_segment_costs
+    from threat_planner.core.cost.near_kernels import near_segment_costs
     rng = np.random.default_rng(0)
     threats = ThreatField.from_arrays(rng.uniform(20.0, 80.0, (16, 3)), np.full(16, 1e4))
     box = Box.from_corners([0.0, 0.0, 0.0], [100.0, 100.0, 100.0])
@@ -209,7 +188,7 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
                       edge_j=edge_j, clock=clock, progress=progress, airspace=airspace,
                       on_initial=on_initial)
     if airspace is not None:   # airspace hook (issue 12)
-        from threat_planner.core.airspace_planning import plan_in_airspace
+        from threat_planner.core.methods.in_airspace import plan_in_airspace
         best = plan_in_airspace(problem)
         network = problem.network
         edge_j = None

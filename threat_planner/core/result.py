@@ -7,11 +7,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from threat_planner.core.cost import Cost
-from threat_planner.core.limits import FlightLimits, LimitCheck
-from threat_planner.core.partition import Network
-from threat_planner.core.smoothing import AngleCheck
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.cost.closed_form import Cost
+from threat_planner.core.network.partition import Network
+from threat_planner.core.optimise.limits import FlightLimits, LimitCheck
+from threat_planner.core.optimise.smoothing import AngleCheck
+from threat_planner.core.world.threats import Box, ThreatField
 
 __all__ = ['PlanResult']
 
@@ -45,7 +45,7 @@ class PlanResult:
         timings_ms: Wall time per stage [ms].
         limits: Physical flight limits in force (method 'best').
         limit_check: The final path's climb, dive, turn radius and altitude against them.
-        warm: Whether the plan was warm-started from a previous one (see core/warm.py).
+        warm: Whether the plan was warm-started from a previous one (see core/methods/warm.py).
         warm_note: Why a warm start was used or refused ('' for a cold plan).
         basin_margin: Relative J gap between the best and second-best screened basin.
         problem: (threats, start, goal, box, config) planned, kept for warm starts.

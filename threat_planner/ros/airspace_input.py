@@ -16,9 +16,9 @@ from typing import Optional, Sequence
 from numpy.typing import NDArray
 import yaml
 
-from threat_planner.core.airspace import Airspace
-from threat_planner.core.terrain import Terrain
-from threat_planner.core.zones import Zone
+from threat_planner.core.world.airspace import Airspace
+from threat_planner.core.world.terrain import Terrain
+from threat_planner.core.world.zones import Zone
 from threat_planner.errors import InputError
 
 __all__ = ['AIRSPACE_FILE_KEYS', 'airspace_of', 'check_airspace_endpoints',

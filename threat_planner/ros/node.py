@@ -67,10 +67,8 @@ from threat_planner.ros.inputs import accept, input_stamp, InputState
 from threat_planner.ros.interface import (INPUT_TOPICS, LATCHED, NODE_NAME, OUTPUT_TOPICS,
                                           PARAMETER_EVENT_TYPE, PARAMETER_EVENTS_QOS,
                                           PARAMETER_EVENTS_TOPIC, POSE_INPUT, THREAT_INPUT)
-from threat_planner.ros.outputs import (input_values, outcome_messages, PlanOutcome,
-                                        PlanRequest)
-from threat_planner.ros.parameters import (descriptor, PARAMETER_DEFAULTS,
-                                           PLANNING_PARAMETERS)
+from threat_planner.ros.outputs import input_values, outcome_messages, PlanOutcome, PlanRequest
+from threat_planner.ros.parameters import descriptor, PARAMETER_DEFAULTS, PLANNING_PARAMETERS
 from threat_planner.ros.plan_service import PlanService
 from threat_planner.ros.process import run_node
 from threat_planner.ros.worker import ProcessPlanWorker

@@ -21,14 +21,13 @@ from nav_msgs.msg import Path
 from numpy.typing import NDArray
 from visualization_msgs.msg import MarkerArray
 
-from threat_planner.core.airspace import Airspace
-from threat_planner.core.cost import Cost
+from threat_planner.core.cost.closed_form import Cost
 from threat_planner.core.planner import plan
 from threat_planner.core.result import PlanResult
-from threat_planner.core.threats import Box, ThreatField
+from threat_planner.core.world.airspace import Airspace
+from threat_planner.core.world.threats import Box, ThreatField
 from threat_planner.errors import InputError, PlanningError
-from threat_planner.ros.conversions import (network_markers, path_to_msg, plan_info_msg,
-                                            stamp_to_ns)
+from threat_planner.ros.conversions import network_markers, path_to_msg, plan_info_msg, stamp_to_ns
 from threat_planner.ros.conversions.markers import airspace_markers
 from threat_planner.ros.parameters import NodeSettings
 
@@ -94,7 +93,7 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
         Called with an outcome holding ``best_so_far`` (the network route) as soon as the
         search has found it, before the smoothing and optimisation.
     warm_start : PlanResult, optional
-        The previous plan, to replan from after a small change (core/warm.py decides).
+        The previous plan, to replan from after a small change (core/methods/warm.py decides).
 
     Returns
     -------

@@ -1,7 +1,7 @@
 """The node's parameters: declarations derived from the settings, and their validation.
 
 Every parameter, its default, range, unit and help come from
-:data:`threat_planner.core.settings.SETTINGS`; this module turns them into
+:data:`threat_planner.core.inputs.settings.SETTINGS`; this module turns them into
 ``ParameterDescriptor`` s and checks a set of values as a whole
 (:func:`settings_from_parameters`).
 """
@@ -16,9 +16,9 @@ from numpy.typing import NDArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
 
-from threat_planner.core.config import PlannerConfig
-from threat_planner.core.settings import NODE_SETTINGS
-from threat_planner.core.threats import as_point, Box
+from threat_planner.core.inputs.config import PlannerConfig
+from threat_planner.core.inputs.settings import NODE_SETTINGS
+from threat_planner.core.world.threats import as_point, Box
 from threat_planner.errors import InputError
 
 __all__ = ['CONFIG_FIELDS', 'NodeSettings', 'PARAMETER_DEFAULTS', 'PLANNING_PARAMETERS',

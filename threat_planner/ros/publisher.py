@@ -32,10 +32,10 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
-from threat_planner.ros.conversions import pointcloud2_from_threats
+from threat_planner.core.inputs.scenario import load_scenario, Scenario
 from threat_planner.errors import InputError
+from threat_planner.ros.conversions import pointcloud2_from_threats
 from threat_planner.ros.process import run_node
-from threat_planner.core.scenario import load_scenario, Scenario
 
 __all__ = ['ThreatDrift', 'ThreatPublisher', 'main']
 

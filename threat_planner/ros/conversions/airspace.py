@@ -34,9 +34,9 @@ from numpy.typing import NDArray
 from sensor_msgs.msg import Image
 from visualization_msgs.msg import Marker, MarkerArray
 
-from threat_planner.core.airspace import make_zone
-from threat_planner.core.terrain import Terrain
-from threat_planner.core.zones import BoxZone, Cylinder, Prism, Sphere, Zone
+from threat_planner.core.world.airspace import make_zone
+from threat_planner.core.world.terrain import Terrain
+from threat_planner.core.world.zones import BoxZone, Cylinder, Prism, Sphere, Zone
 from threat_planner.errors import InputError
 from threat_planner.ros.conversions._common import check_frame, make_header
 

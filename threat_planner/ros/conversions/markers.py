@@ -10,9 +10,9 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from threat_planner.errors import InputError
-from threat_planner.ros.conversions.airspace import zones_to_markers
 from threat_planner.ros.conversions._common import (as_edges, as_points, check_finite_rows,
                                                     make_header)
+from threat_planner.ros.conversions.airspace import zones_to_markers
 
 #: Above this many threats, :func:`network_markers` draws one fixed-size SPHERE_LIST
 #: instead of one intensity-scaled SPHERE per threat (RViz cost grows per marker).
@@ -192,7 +192,7 @@ def airspace_markers(airspace, frame_id: str, stamp: Time,
 
     Parameters
     ----------
-    airspace : threat_planner.core.airspace.Airspace
+    airspace : threat_planner.core.world.airspace.Airspace
         Zones and terrain.
     frame_id : str
         Frame of the markers.

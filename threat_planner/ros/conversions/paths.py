@@ -7,7 +7,7 @@ from nav_msgs.msg import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from threat_planner.ros.conversions._common import (as_points, make_header)
+from threat_planner.ros.conversions._common import as_points, make_header
 
 # Segments shorter than this carry no usable direction (rounding noise would give
 # an arbitrary heading), so path_to_msg reuses the previous direction instead.

@@ -7,7 +7,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from threat_planner.errors import InputError
-from threat_planner.ros.conversions._common import (check_count, check_finite_rows, check_frame)
+from threat_planner.ros.conversions._common import check_count, check_finite_rows, check_frame
 
 
 def threats_from_pose_array(

@@ -1,0 +1,1 @@
+"""Settings, PlannerConfig, scenario files: what the user gives (imports: world)."""

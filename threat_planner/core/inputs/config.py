@@ -1,0 +1,81 @@
+"""PlannerConfig: the planner's settings, with defaults and ranges from :mod:`.settings`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from threat_planner.core.inputs.settings import PLANNER_SETTINGS
+
+__all__ = ['PlannerConfig']
+
+_D = {name: s.default for name, s in PLANNER_SETTINGS.items()}
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Planner settings; every field has a sensible default.
+
+    The meaning, unit and range of every field are declared once in
+    :data:`threat_planner.core.inputs.settings.SETTINGS`.
+
+    Attributes:
+        w: Threat weight in J = w J_R + (1-w) J_L, 0 < w < 1.
+        method: 'paper', 'improved' or 'best'.
+        k: Spring coefficient of the smoothing chain.
+        auto_k: Sweep k over K_SWEEP for least J (Case 3); 'improved' always does.
+        damping: Damping coefficient b between neighbouring masses (eq. 9-10).
+        mass: Mass M of each chain point (eq. 14).
+        q: Repulsion constant Q (eq. 13).
+        n_points: Number of chain segments n (the chain has n+1 points).
+        max_pitch_deg: Pitch limit [deg].
+        max_turn_deg: Turn (steering) limit between consecutive segments [deg].
+        max_climb_deg: Steepest climb of a segment ('best') [deg]; 90 = off.
+        max_dive_deg: Steepest dive of a segment ('best') [deg]; 90 = off.
+        min_turn_radius_m: Smallest turn radius through 3 consecutive points ('best')
+            [m]; 0 = off.
+        min_altitude_m: Lowest height above the box floor ('best') [m]; 0 = off.
+        entry_candidates: K nodes tried as entry and as exit (Case 1).
+        candidates: How 'improved' picks them: 'spread' (Fig. 11) or 'nearest'.
+        network: 'box' (threats and the box surface) or 'threats' (the paper's).
+        routes: Distinct network routes screened by 'best' (plus the straight line).
+        surface_seeds: Also screen routes over the box's surface lattice ('best' only).
+        box_divisions: Intervals per box edge of the auxiliary surface lattice.
+        optimise: Run the direct J minimisation ('best' only).
+        confine_to_box: Keep the optimised path inside the flight box; False lets the
+            direct minimisation leave it (the reference yardstick's setting).
+        max_smoothing_steps: Step limit of the chain integration.
+    """
+
+    w: float = _D['w']
+    method: str = _D['method']
+    k: float = _D['k']
+    auto_k: bool = _D['auto_k']
+    damping: float = _D['damping']
+    mass: float = _D['mass']
+    q: float = _D['q']
+    n_points: int = _D['n_points']
+    max_pitch_deg: float = _D['max_pitch_deg']
+    max_turn_deg: float = _D['max_turn_deg']
+    max_climb_deg: float = _D['max_climb_deg']
+    max_dive_deg: float = _D['max_dive_deg']
+    min_turn_radius_m: float = _D['min_turn_radius_m']
+    min_altitude_m: float = _D['min_altitude_m']
+    entry_candidates: int = _D['entry_candidates']
+    candidates: str = _D['candidates']
+    network: str = _D['network']
+    routes: int = _D['routes']
+    surface_seeds: bool = _D['surface_seeds']
+    box_divisions: int = _D['box_divisions']
+    optimise: bool = _D['optimise']
+    confine_to_box: bool = _D['confine_to_box']
+    max_smoothing_steps: int = _D['max_smoothing_steps']
+
+    def validated(self) -> 'PlannerConfig':
+        """Return self after checking every field against its declared range.
+
+        Raises:
+            InputError: naming the field and its bad value.
+        """
+        for name, setting in PLANNER_SETTINGS.items():
+            setting.check(getattr(self, name))
+        return self

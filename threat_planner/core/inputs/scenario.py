@@ -1,0 +1,294 @@
+"""Scenario files: the flight box, start, goal and threats, in YAML.
+
+Layout (as in the bundled ``test/data/*.yaml``)::
+
+    name: uniform20_0
+    frame_id: map
+    description: optional text
+    bounds: {min: [x, y, z], max: [x, y, z]}
+    start: [x, y, z]
+    goal: [x, y, z]
+    threats:
+      - {position: [x, y, z], intensity: F}   # optional lethal_radius: r
+
+and optionally ``no_fly_zones`` and ``terrain`` (see :mod:`threat_planner.core.world.airspace`).
+Big threat pictures may instead name a compact file next to the YAML, ``threats_file:
+threats.npy`` (an (N, 4) float array) or ``threats.csv`` (comma-separated, ``#`` comments,
+an optional header line), columns x y z F: it loads in milliseconds where 10,000 YAML
+mappings take seconds even with libyaml.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import difflib
+from pathlib import Path
+import warnings
+
+import numpy as np
+import yaml
+
+from threat_planner.core.inputs.yaml_threats import load_document
+from threat_planner.core.world.airspace import Airspace
+from threat_planner.core.world.threats import Box, check_endpoints, ThreatField
+from threat_planner.errors import InputError, ScenarioError
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A planning problem.
+
+    Attributes:
+        name: Scenario name.
+        frame_id: Frame of every coordinate.
+        description: Free text.
+        box: Flight box.
+        start: Start point (3,) [m].
+        goal: Goal point (3,) [m].
+        threats: The threat field.
+    """
+
+    name: str
+    frame_id: str
+    description: str
+    box: Box
+    start: np.ndarray
+    goal: np.ndarray
+    threats: ThreatField
+    airspace: Airspace = field(default_factory=Airspace)
+
+    def to_dict(self) -> dict:
+        """Return the scenario in the YAML file layout."""
+        out = {
+            'name': self.name, 'frame_id': self.frame_id, 'description': self.description,
+            'bounds': {'min': self.box.lo.tolist(), 'max': self.box.hi.tolist()},
+            'start': self.start.tolist(), 'goal': self.goal.tolist(),
+            'threats': [{'position': p.tolist(), 'intensity': float(f)}
+                        for p, f in zip(self.threats.positions, self.threats.intensities)],
+        }
+        if self.airspace:
+            lethal = self.airspace.lethal_radii(len(self.threats))
+            for t, r in zip(out['threats'], lethal):
+                if np.isfinite(r):
+                    t['lethal_radius'] = float(r)
+            out.update(self.airspace.to_mapping())
+        return out
+
+
+#: Keys a scenario file may hold; the airspace keys are read by the airspace layer.
+TOP_KEYS = ('name', 'frame_id', 'description', 'bounds', 'start', 'goal', 'threats',
+            'threats_file', 'no_fly_zones', 'terrain', 'lethal_radius')
+#: Suffixes a ``threats_file`` may have.
+THREATS_FILE_SUFFIXES = ('.npy', '.csv')
+BOUNDS_KEYS = ('min', 'max')
+THREAT_KEYS = ('position', 'intensity', 'lethal_radius')
+
+
+def _check_keys(mapping: dict, known: tuple, where: str, fail) -> None:
+    """Refuse an unknown (often misspelt) key, naming it and the nearest known one."""
+    for key in mapping:
+        if key in known:
+            continue
+        close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+        hint = f'; did you mean "{close[0]}"?' if close else ''
+        # A key with control characters (a stray newline) is shown escaped: one line.
+        name = str(key) if str(key).isprintable() else repr(str(key))[1:-1]
+        raise fail(f'unknown field "{where}{name}"{hint} (known: {", ".join(known)})')
+
+
+def _is_header(line: str) -> bool:
+    """Whether a CSV first line is a header: no field of it reads as a number."""
+    fields = [f.strip() for f in line.split('#')[0].split(',') if f.strip()]
+
+    def number(text: str) -> bool:
+        try:
+            float(text)
+        except ValueError:
+            return False
+        return True
+    return bool(fields) and not any(number(f) for f in fields)
+
+
+def read_threats_file(name: object, base: Path | None) -> np.ndarray:
+    """Read a ``threats_file``: an (N, 4) array of x y z [m] and intensity F.
+
+    Args:
+        name: The field's value, a path relative to ``base`` (or absolute).
+        base: Folder of the scenario file (None: the working directory).
+
+    Returns:
+        The rows, float, shape (N, 4).
+
+    Raises:
+        InputError: naming ``threats_file`` and what is wrong with it.
+    """
+    if not isinstance(name, str) or not name:
+        raise InputError(f'threats_file: expected a file name, got {name!r}')
+    path = Path(name) if base is None else base / name
+    suffix = path.suffix.lower()
+    if suffix not in THREATS_FILE_SUFFIXES:
+        raise InputError(f'threats_file: {name} must end in '
+                         f'{" or ".join(THREATS_FILE_SUFFIXES)}')
+    try:
+        if suffix == '.npy':
+            rows = np.load(path, allow_pickle=False)
+        else:
+            with open(path, encoding='utf-8') as fh:
+                header = _is_header(fh.readline())
+                fh.seek(0)
+                with warnings.catch_warnings():
+                    # An empty table is a valid empty threat picture, not a warning.
+                    warnings.simplefilter('ignore', UserWarning)
+                    rows = np.loadtxt(fh, delimiter=',', comments='#', ndmin=2,
+                                      skiprows=int(header))
+    except OSError as exc:
+        raise InputError(f'threats_file: cannot read {path} ({exc.strerror or exc})') from None
+    except ValueError as exc:
+        raise InputError(f'threats_file: {name} is not a table of numbers ({exc})') from None
+    rows = np.asarray(rows)
+    if rows.size == 0:
+        return np.zeros((0, 4))
+    if rows.ndim != 2 or rows.shape[1] != 4 or not np.issubdtype(rows.dtype, np.number):
+        raise InputError(f'threats_file: {name} needs 4 numeric columns x y z F, got shape '
+                         f'{list(rows.shape)}')
+    return rows.astype(float)
+
+
+def _threat_rows(data: dict, base: Path | None, fail) -> tuple:
+    """Positions, intensities and lethal radii from ``threats`` or ``threats_file``.
+
+    The file gives arrays (already (N, 3) and (N,)); the YAML list gives lists.
+    """
+    if 'threats_file' in data:
+        if data.get('threats'):
+            raise fail('give "threats" or "threats_file", not both')
+        try:
+            rows = read_threats_file(data['threats_file'], base)
+        except InputError as exc:
+            raise fail(str(exc)) from None
+        return rows[:, :3], rows[:, 3], [float('nan')] * len(rows)
+    threats = data['threats'] if data['threats'] is not None else []
+    if not isinstance(threats, list):
+        raise fail('field "threats" must be a list')
+    positions, intensities, lethal = [], [], []
+    for i, t in enumerate(threats):
+        if not isinstance(t, dict) or 'position' not in t or 'intensity' not in t:
+            raise fail(f'threats[{i}] needs "position" and "intensity"')
+        _check_keys(t, THREAT_KEYS, f'threats[{i}].', fail)
+        positions.append(t['position'])
+        intensities.append(t['intensity'])
+        lethal.append(t.get('lethal_radius', float('nan')))
+    return positions, intensities, lethal
+
+
+def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
+    """Build and validate a Scenario from parsed YAML.
+
+    Args:
+        data: The parsed document.
+        source: Where it came from, for error messages.
+
+    Returns:
+        The Scenario.
+
+    Raises:
+        ScenarioError: one line naming the source and the bad field.
+    """
+    def fail(msg: str) -> ScenarioError:
+        return ScenarioError(f'{source}: {msg}')
+
+    if not isinstance(data, dict):
+        raise fail('expected a mapping at the top level')
+    _check_keys(data, TOP_KEYS, '', fail)
+    for key in ('bounds', 'start', 'goal'):
+        if key not in data:
+            raise fail(f'missing field "{key}"')
+    if 'threats' not in data and 'threats_file' not in data:
+        raise fail('missing field "threats" (or "threats_file")')
+    bounds = data['bounds']
+    if not isinstance(bounds, dict) or 'min' not in bounds or 'max' not in bounds:
+        raise fail('field "bounds" needs "min" and "max"')
+    _check_keys(bounds, BOUNDS_KEYS, 'bounds.', fail)
+    base = None if source.startswith('<') else Path(source).parent
+    positions, intensities, lethal = _threat_rows(data, base, fail)
+    try:
+        for i, p in enumerate(positions if isinstance(positions, list) else ()):
+            if not isinstance(p, (list, tuple)) or len(p) != 3:
+                raise InputError(f'threats[{i}].position: expected [x, y, z], got {p!r}')
+        box = Box.from_corners(bounds['min'], bounds['max'])
+        threat_field = ThreatField.from_arrays(
+            np.array(positions, dtype=float).reshape(-1, 3), np.array(intensities, dtype=float))
+        start, goal = check_endpoints(data['start'], data['goal'], box, threat_field)
+        airspace = Airspace.from_mapping(
+            {k: data[k] for k in ('no_fly_zones', 'terrain') if k in data}, base,
+            lethal_radii=[float('nan') if r is None else r for r in lethal],
+            threat_positions=threat_field.positions)
+        airspace.check_point('start', start)
+        airspace.check_point('goal', goal)
+    except InputError as exc:
+        raise fail(str(exc)) from None
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise fail(f'bad value ({exc})') from None
+    return Scenario(str(data.get('name', Path(source).stem)), str(data.get('frame_id', 'map')),
+                    str(data.get('description', '') or ''), box, start, goal, threat_field,
+                    airspace)
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a scenario YAML file.
+
+    Args:
+        path: File path.
+
+    Returns:
+        The Scenario.
+
+    Raises:
+        ScenarioError: one line naming the file and the bad field.
+    """
+    path = Path(path)
+    try:
+        text = path.read_bytes()
+    except OSError as exc:
+        raise ScenarioError(f'{path}: cannot read ({exc.strerror})') from None
+    try:
+        data = load_document(text)
+    except (yaml.YAMLError, ValueError, RecursionError) as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f' at line {mark.line + 1}' if mark else ''
+        raise ScenarioError(f'{path}: not valid YAML{where}') from None
+    return scenario_from_dict(data, str(path))
+
+
+def save_scenario(scenario: Scenario, path: str | Path, threats_file: str | None = None) -> None:
+    """Write a scenario file that :func:`load_scenario` reads back to the same scenario.
+
+    Args:
+        scenario: The scenario.
+        path: The YAML file to write.
+        threats_file: If given (``*.npy`` or ``*.csv``, relative to the YAML's folder), the
+            threats go there as x y z F instead of the YAML list: for big pictures. Lethal
+            radii need the list (the table has no column for them).
+
+    Raises:
+        InputError: a bad ``threats_file`` name, or lethal radii with a ``threats_file``.
+    """
+    path = Path(path)
+    doc = scenario.to_dict()
+    if threats_file is not None:
+        suffix = Path(threats_file).suffix.lower()
+        if suffix not in THREATS_FILE_SUFFIXES:
+            raise InputError(f'threats_file: {threats_file} must end in '
+                             f'{" or ".join(THREATS_FILE_SUFFIXES)}')
+        if any('lethal_radius' in t for t in doc['threats']):
+            raise InputError('threats_file: lethal radii need the threats list')
+        rows = np.column_stack([scenario.threats.positions, scenario.threats.intensities])
+        table = path.parent / threats_file
+        if suffix == '.npy':
+            np.save(table, rows)
+        else:
+            # 17 significant digits: the floats read back bit for bit.
+            np.savetxt(table, rows, delimiter=',', fmt='%.17g', header='x,y,z,F', comments='')
+        doc.pop('threats')
+        doc['threats_file'] = threats_file
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))

@@ -1,0 +1,1 @@
+"""Delaunay partition, incentre network, Dijkstra, surface seeds (imports: cost, world)."""

@@ -1,0 +1,140 @@
+"""Extra seeds for ``best``'s screening: routes along the flight box's faces and edges.
+
+In a dense field the least-J path inside the box often hugs the box: up a vertical edge,
+along the ceiling's edge, down the far edge, as far from the threat cloud as the box allows.
+The incentre network's routes run between threats and rarely reach that basin, and a local
+minimisation from them cannot cross the threats to get there. A coarse lattice on the box's
+surface, 8-connected on every face, with each edge weighted by its J (closed form; in big
+fields only threats within two typical spacings, with no far-field tail: the tail assumes
+threats all around, while at the box's surface half the space is empty) gives a few surface
+routes by Dijkstra; the screening then decides whether one of them wins.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import NDArray
+
+from threat_planner.core.network.graph_kernels import Graph
+from threat_planner.core.network.search import segment_costs
+from threat_planner.core.world.threats import Box, ThreatField
+
+__all__ = ['SURFACE_DIVISIONS', 'SURFACE_ROUTES', 'surface_lattice', 'surface_routes']
+
+#: Intervals per box edge of the surface lattice.
+SURFACE_DIVISIONS = 8
+#: Surface routes returned (each next one with the edges of earlier ones penalised).
+SURFACE_ROUTES = 2
+#: Lattice points the start and the goal are joined to.
+TERMINAL_LEGS = 6
+#: (edge, threat) pairs costed exactly before the lattice switches to the cut-off (by
+#: default; the caller may allow more).
+DENSE_PAIRS = 100_000
+#: Cut-off radius of the lattice's edge costs, in typical threat spacings.
+CUTOFF_SPACINGS = 2.0
+#: Factor on the weight of edges an earlier route used.
+ROUTE_PENALTY = 3.0
+
+
+def surface_lattice(box: Box, divisions: int) -> tuple[NDArray, NDArray]:
+    """Lattice on the box's surface and its edges that lie on a face.
+
+    Args:
+        box: The flight box.
+        divisions: Intervals per box edge.
+
+    Returns:
+        ``(points (P, 3) [m], edges (E, 2))``: neighbours differ by at most one step per
+        axis and share a face, so every edge runs on the surface (face diagonals included).
+    """
+    cells, edges = _unit_lattice(divisions)
+    return box.lo + cells / divisions * (box.hi - box.lo), edges
+
+
+@lru_cache(maxsize=4)
+def _unit_lattice(divisions: int) -> tuple[NDArray, NDArray]:
+    """Return the lattice in integer cells 0..divisions per axis (read-only: shared)."""
+    n = divisions
+    ticks = np.arange(n + 1)
+    grid = np.stack(np.meshgrid(ticks, ticks, ticks, indexing='ij'), axis=-1).reshape(-1, 3)
+    on_face = (grid == 0) | (grid == n)
+    surface = on_face.any(axis=1)
+    ids = np.full(len(grid), -1, dtype=np.int64)
+    ids[surface] = np.arange(int(surface.sum()))
+    cells = grid[surface]
+    offsets = np.array([o for o in np.ndindex(3, 3, 3)]) - 1
+    offsets = offsets[[tuple(o) > (0, 0, 0) for o in offsets]]
+    pairs = []
+    for o in offsets:
+        b = cells + o
+        ok = np.all((b >= 0) & (b <= n), axis=1)
+        # The edge lies on a face when an axis it does not move along is at 0 or n.
+        ok &= np.any((o == 0) & ((cells == 0) | (cells == n)), axis=1)
+        flat = (b[ok] * [(n + 1) ** 2, n + 1, 1]).sum(axis=1)
+        dst = ids[flat]
+        src = np.flatnonzero(ok)
+        keep = dst >= 0
+        pairs.append(np.stack([src[keep], dst[keep]], axis=1))
+    edges = np.concatenate(pairs)
+    cells.setflags(write=False)
+    edges.setflags(write=False)
+    return cells, edges
+
+
+def surface_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: float,
+                   divisions: int = SURFACE_DIVISIONS, count: int = SURFACE_ROUTES,
+                   dense_pairs: int | None = None) -> list[NDArray]:
+    """Least-J routes from s to t over the box's surface lattice, as polylines in the box.
+
+    Args:
+        threats: The threat field.
+        s: Start (3,) [m], in the box.
+        t: Goal (3,) [m], in the box.
+        box: The flight box.
+        w: Threat weight of J.
+        divisions: Intervals per box edge of the lattice.
+        count: Most routes returned.
+        dense_pairs: Most (edge, threat) pairs costed exactly (default DENSE_PAIRS).
+
+    Returns:
+        Distinct polylines ``[s, lattice points..., t]`` (each (m, 3) [m]), best first.
+    """
+    points, edges = surface_lattice(box, divisions)
+    m = len(points)
+    k = min(TERMINAL_LEGS, m)
+    legs = [np.atleast_1d(np.argsort(np.linalg.norm(points - p, axis=1))[:k]) for p in (s, t)]
+    a = np.concatenate([points[edges[:, 0]], np.repeat(s[None], k, 0), points[legs[1]]])
+    b = np.concatenate([points[edges[:, 1]], points[legs[0]], np.repeat(t[None], k, 0)])
+    radius = None if len(a) * len(threats) <= (dense_pairs or DENSE_PAIRS) \
+        else CUTOFF_SPACINGS * threats.typical_spacing(box)
+    threat, _ = segment_costs(a, b, threats, radius)
+    lengths = np.linalg.norm(b - a, axis=1)
+    weights = w * threat + (1.0 - w) * lengths
+    # Vertices m and m + 1 are the start and the goal.
+    rows = np.concatenate([edges[:, 0], np.full(k, m), legs[1]])
+    cols = np.concatenate([edges[:, 1], legs[0], np.full(k, m + 1)])
+    weights = np.maximum(weights, 1e-12)
+    keys = np.minimum(rows, cols) * (m + 2) + np.maximum(rows, cols)
+    graph = Graph(m + 2, np.stack([rows, cols], axis=1))
+    routes: list[NDArray] = []
+    seqs: list[list[int]] = []
+    for _ in range(2 * count):
+        dist, pred = graph.shortest(weights, m)
+        if not np.isfinite(dist[m + 1]):
+            break
+        seq = [m + 1]
+        while seq[-1] != m:
+            seq.append(int(pred[seq[-1]]))
+        seq.reverse()
+        inner = seq[1:-1]
+        if inner not in seqs:
+            seqs.append(inner)
+            routes.append(box.clip(np.vstack([s, points[inner], t])))
+            if len(routes) == count:
+                break
+        a_, b_ = np.array(seq[:-1]), np.array(seq[1:])
+        used = np.minimum(a_, b_) * (m + 2) + np.maximum(a_, b_)
+        weights = np.where(np.isin(keys, used), weights * ROUTE_PENALTY, weights)
+    return routes
