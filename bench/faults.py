@@ -27,7 +27,7 @@ Usage::
     .venv/bin/python bench/faults.py                 # all three, writes the results
     .venv/bin/python bench/faults.py --repeats 5 --out ''
 
-``test/test_node_faults.py`` runs the same functions at CI size.
+``test/ros/test_node_faults.py`` runs the same functions at CI size.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Re-record the regression bags of ``test/data/bags/`` with the live planner node.
 
-``test/test_replay.py`` replays every bag in ``test/data/bags/`` (``threat-planner replay``):
+``test/ros/test_replay.py`` replays every bag in ``test/data/bags/`` (``threat-planner replay``):
 it re-plans each input state the bag holds with the parameters the bag holds and fails
 on any difference from the recorded plans. The bags therefore pin the planner's current
 output. When the planner's results change **on purpose** (the algorithm is tuned, a

@@ -12,7 +12,7 @@ import pytest
 from threat_planner.core.cost.closed_form import path_cost
 from threat_planner.core.world.threats import Box, ThreatField
 
-BENCH = Path(__file__).resolve().parents[1] / 'bench'
+BENCH = Path(__file__).resolve().parents[2] / 'bench'
 if str(BENCH) not in sys.path:
     sys.path.insert(0, str(BENCH))
 bt = importlib.import_module('bench_tools')

@@ -6,7 +6,7 @@ import sys
 
 from node_harness import domain_id, ros_env
 
-DATA = Path(__file__).parent / 'data'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 
 
 def test_live_demo_prints_replans_and_writes_the_last_figure(tmp_path):

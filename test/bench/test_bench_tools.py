@@ -12,8 +12,8 @@ from threat_planner.core.cost.closed_form import path_cost
 from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.world.threats import Box, ThreatField
 
-BENCH = Path(__file__).resolve().parents[1] / 'bench'
-DATA = Path(__file__).resolve().parent / 'data'
+BENCH = Path(__file__).resolve().parents[2] / 'bench'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 if str(BENCH) not in sys.path:
     sys.path.insert(0, str(BENCH))
 bt = importlib.import_module('bench_tools')

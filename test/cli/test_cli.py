@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-DATA = Path(__file__).parent / 'data'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 
 
 def _run(*args, cwd=None):

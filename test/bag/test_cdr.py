@@ -34,7 +34,7 @@ from threat_planner.bag import McapRecorder, message_definition, message_type_na
 from threat_planner.bag.cdr import CdrLayout, canonical_cdr, parse_definition
 from threat_planner.errors import RecordingError
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 
 

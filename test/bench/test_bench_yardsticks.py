@@ -11,11 +11,11 @@ import pytest
 from threat_planner.core.cost.closed_form import path_cost
 from threat_planner.core.inputs.scenario import load_scenario
 
-BENCH = Path(__file__).resolve().parents[1] / 'bench'
+BENCH = Path(__file__).resolve().parents[2] / 'bench'
 if str(BENCH) not in sys.path:
     sys.path.insert(0, str(BENCH))
 yd = importlib.import_module('yardsticks')
-DATA = Path(__file__).parent / 'data'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 W = 0.5
 
 

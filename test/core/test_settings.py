@@ -11,7 +11,7 @@ from threat_planner.core.inputs.settings import (NODE_SETTINGS, params_file_text
                                                  SETTINGS)
 from threat_planner.errors import InputError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_planner_config_fields_are_the_planner_settings():

@@ -9,7 +9,7 @@ import yaml
 from threat_planner.core.inputs.scenario import load_scenario, scenario_from_dict
 from threat_planner.errors import ScenarioError
 
-DATA = Path(__file__).parent / 'data'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 
 
 @pytest.mark.parametrize('path', sorted(DATA.glob('*.yaml')), ids=lambda p: p.stem)

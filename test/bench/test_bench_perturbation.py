@@ -8,7 +8,7 @@ import numpy as np
 
 from threat_planner.core.world.threats import ThreatField
 
-BENCH = Path(__file__).resolve().parents[1] / 'bench'
+BENCH = Path(__file__).resolve().parents[2] / 'bench'
 if str(BENCH) not in sys.path:
     sys.path.insert(0, str(BENCH))
 rp = importlib.import_module('run_perturbation')

@@ -149,7 +149,7 @@ def _bench_tools():
     """The bench's helpers (bench/bench_tools.py), for its exact warm-replan move."""
     import importlib
     import sys
-    bench = str(Path(__file__).resolve().parents[1] / 'bench')
+    bench = str(Path(__file__).resolve().parents[2] / 'bench')
     if bench not in sys.path:
         sys.path.insert(0, bench)
     return importlib.import_module('bench_tools')

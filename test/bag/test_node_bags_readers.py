@@ -15,7 +15,7 @@ from rosbags.typesys import get_typestore, Stores
 
 from threat_planner.bag import deserialize
 
-BAGS = sorted((Path(__file__).resolve().parent / 'data' / 'bags').glob('*.mcap'))
+BAGS = sorted((Path(__file__).resolve().parents[1] / 'data' / 'bags').glob('*.mcap'))
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 
 

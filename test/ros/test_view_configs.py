@@ -8,7 +8,7 @@ import yaml
 
 from threat_planner.ros.interface import INPUT_TOPICS, OUTPUT_TOPICS
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 KNOWN = {'/' + t for t in {**INPUT_TOPICS, **OUTPUT_TOPICS}}
 SHOWN = {'/path', '/initial_path', '/network', '/no_fly_zones'}
 

@@ -92,7 +92,8 @@ def test_the_kernel_cache_is_named_by_every_compiled_module():
     from threat_planner.core import _numba_cache
 
     core = Path(_numba_cache.__file__).parent
-    compiled = {p.name for p in core.glob('*.py') if '@njit(cache=True' in p.read_text()}
+    compiled = {p.relative_to(core).as_posix() for p in core.rglob('*.py')
+                if '@njit(cache=True' in p.read_text()}
     assert compiled and compiled <= set(_numba_cache.SOURCES)
     assert numba.config.CACHE_DIR == str(_numba_cache.cache_dir())
     assert _numba_cache.cache_dir().name != ''

@@ -13,7 +13,7 @@ from threat_planner.core.planner import K_SWEEP, plan, PlannerConfig
 from threat_planner.core.world.threats import Box, ThreatField
 from threat_planner.errors import InputError
 
-DATA = Path(__file__).parent / 'data'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 REFERENCE = json.loads((DATA / 'reference.json').read_text())
 
 

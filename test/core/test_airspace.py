@@ -17,7 +17,7 @@ from threat_planner.core.world.terrain import Terrain
 from threat_planner.core.world.threats import Box, ThreatField
 from threat_planner.errors import InputError, PlanningError, ScenarioError
 
-DATA = Path(__file__).parent / 'data'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 AIR_SCENARIOS = sorted(DATA.glob('air_*.yaml'))
 RNG = np.random.default_rng(12)
 

@@ -17,7 +17,7 @@ from threat_planner.core.planner import plan, PlannerConfig
 from threat_planner.core.world.threats import Box
 from threat_planner.errors import PlanningError
 
-DATA = Path(__file__).parent / 'data'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 BUNDLED = sorted(p.stem for p in DATA.glob('*.yaml'))
 BOX = Box.from_corners([0, 0, 0], [100, 100, 100])
 

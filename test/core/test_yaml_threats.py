@@ -9,7 +9,7 @@ import yaml
 from threat_planner.core.inputs import yaml_threats
 from threat_planner.core.inputs.scenario import load_scenario, save_scenario
 
-DATA = Path(__file__).parent / 'data'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
 
 

@@ -27,7 +27,7 @@ from threat_planner.bag import (INPUT_QOS, LATCHED_QOS, McapRecorder, message_de
 from threat_planner.bag.definitions import _build_definition
 from threat_planner.errors import RecordingError
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SEPARATOR = '=' * 80
 T0 = 1_700_000_000_123_456_789  # ns; odd digits catch any float rounding of times
 

@@ -10,7 +10,7 @@ import yaml
 from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.errors import ScenarioError
 
-DATA = Path(__file__).parent / 'data'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 
 
 def _split(tmp_path: Path, rows: np.ndarray, suffix: str, header: bool = True) -> Path:

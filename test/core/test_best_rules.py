@@ -14,7 +14,7 @@ from threat_planner.core.methods.basins import (basin_lead as _lead,
 from threat_planner.core.optimise.optimisation import is_crowded
 from threat_planner.core.world.threats import Box
 
-DATA = Path(__file__).resolve().parent / 'data'
+DATA = Path(__file__).resolve().parents[1] / 'data'
 BOX = Box(np.zeros(3), np.full(3, 100.0))
 PROBLEM = SimpleNamespace(box=BOX)
 

@@ -22,7 +22,7 @@ from threat_planner.errors import RecordingError
 
 from test_cdr import make_diagnostics, make_markers, make_parameter_event, make_path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 T0 = 1_700_000_000_000_000_007
 MAKERS = [make_parameter_event, make_path, make_markers, make_diagnostics]
 
