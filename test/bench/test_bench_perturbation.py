@@ -1,4 +1,4 @@
-"""bench/run_perturbation.py: the nudge is what it says, and the report counts what moved."""
+"""bench/run_perturbation.py: the move is what it says, and the report counts what moved."""
 
 import importlib
 from pathlib import Path
@@ -14,26 +14,37 @@ if str(BENCH) not in sys.path:
 rp = importlib.import_module('run_perturbation')
 
 
-def test_every_threat_moves_one_nanometre_and_keeps_its_intensity():
+def test_every_threat_moves_by_the_size_and_keeps_its_intensity():
     rng = np.random.default_rng(0)
     field = ThreatField.from_arrays(rng.uniform(0, 100, (50, 3)), rng.uniform(1, 9, 50))
-    moved = rp.nudged(field, 3)
-    step = np.linalg.norm(moved.positions - field.positions, axis=1)
-    np.testing.assert_allclose(step, rp.NUDGE, rtol=1e-5)
-    assert np.array_equal(moved.intensities, field.intensities)
-    assert np.array_equal(rp.nudged(field, 3).positions, moved.positions)   # seeded
-    assert not np.array_equal(rp.nudged(field, 4).positions, moved.positions)
+    for size in rp.MOVES:
+        moved = rp.nudged(field, 3, size)
+        step = np.linalg.norm(moved.positions - field.positions, axis=1)
+        np.testing.assert_allclose(step, size, rtol=1e-5)
+        assert np.array_equal(moved.intensities, field.intensities)
+        assert np.array_equal(rp.nudged(field, 3, size).positions, moved.positions)  # seeded
+        assert not np.array_equal(rp.nudged(field, 4, size).positions, moved.positions)
 
 
-def test_the_report_counts_cases_and_plans_that_moved():
-    rows = [{'case': 'a', 'limits': 'on', 'J': 10.0, 'ratios': [1.0, 1.2, 0.99],
-             'J_moved': 12.0, 'seed': 'route 0', 'seed_moved': 'route 1'},
-            {'case': 'b', 'limits': 'on', 'J': 5.0, 'ratios': [1.0, 1.0005, 1.0],
-             'J_moved': 5.0025, 'seed': 'route 0', 'seed_moved': 'route 0'},
-            {'case': 'a', 'limits': 'off', 'J': 9.0, 'ratios': [1.0, 1.0, 1.0],
-             'J_moved': 9.0, 'seed': 'route 0', 'seed_moved': 'route 0'}]
+def _row(case, limits, ratios, warm=True, warm_j=10.0, cold_j=10.0):
+    return {'case': case, 'limits': limits, 'J': 10.0, 'ms': 5.0, 'seed': 'route 0',
+            'ratios': {'1e-09': ratios[0], '0.001': ratios[1]},
+            'seeds_moved': {'1e-09': ['route 0'] * 3, '0.001': ['route 1'] * 3},
+            'warm': warm, 'warm_note': 'warm' if warm else 'cold: x', 'warm_ms': 2.0,
+            'warm_J': warm_j, 'cold_J': cold_j}
+
+
+def test_the_report_counts_cases_and_plans_that_moved_and_warm_replans():
+    rows = [_row('a@0.2', 'on', ([1.0, 1.2, 0.99], [1.0, 1.0, 1.0])),
+            _row('b', 'on', ([1.0, 1.0005, 1.0], [1.0, 0.9, 1.0]), warm_j=10.1),
+            _row('a@0.2', 'off', ([1.0, 1.0, 1.0], [1.0, 1.0, 1.0]), warm=False)]
     text = rp.markdown(rows)
-    assert '| on | 2 | 1 | 1 | 1 | 1.0000 | 0.9900 | 1.2000 |' in text
-    assert '| off | 1 | 0 | 0 | 0 | 1.0000 | 1.0000 | 1.0000 |' in text
-    listed = [line for line in text.splitlines() if line.startswith('| a |')]
-    assert len(listed) == 1 and '1.0000 / 1.2000 / 0.9900' in listed[0]
+    # worse: ratio above 1.001 (a at 1 nm); moved: either way (a at 1 nm, b at 1 mm).
+    assert '| on | 1e-09 | 2 | 1 | 1 | 1 | 1 | 1.0000 | 0.9900 | 1.2000 |' in text
+    assert '| on | 0.001 | 2 | 0 | 1 | 0 | 1 | 1.0000 | 0.9000 | 1.0000 |' in text
+    assert '| off | 1e-09 | 1 | 0 | 0 | 0 | 0 | 1.0000 | 1.0000 | 1.0000 |' in text
+    # b's warm J is above its cold J: warm, but not counted as no higher.
+    assert '| on | 2 | 1 | 2 | 1 | 1 | 1 | 2.0 |' in text
+    assert '| off | 1 | 1 | 0 | 0 | 0 | 0 | nan |' in text
+    listed = [line for line in text.splitlines() if line.startswith('| a@0.2 |')]
+    assert len(listed) == 1 and '1.0000 / 1.2000 / 0.9900 ; 1.0000' in listed[0]
