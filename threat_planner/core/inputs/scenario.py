@@ -16,6 +16,11 @@ Big threat pictures may instead name a compact file next to the YAML, ``threats_
 threats.npy`` (an (N, 4) float array) or ``threats.csv`` (comma-separated, ``#`` comments,
 an optional header line), columns x y z F: it loads in milliseconds where 10,000 YAML
 mappings take seconds even with libyaml.
+
+``datum: [lat, lon, h]`` ties the local frame to WGS84 (East-North-Up at the datum), so
+plans can be exported with latitudes and longitudes; with ``coordinates: geodetic`` every
+position of the file is given in WGS84 (:mod:`threat_planner.core.inputs.geodetic`), and
+``terrain: {dem: FILE.tif}`` reads a GeoTIFF DEM (:mod:`threat_planner.core.geo.dem`).
 """
 
 from __future__ import annotations
@@ -23,11 +28,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import difflib
 from pathlib import Path
+from typing import Optional
 import warnings
 
 import numpy as np
 import yaml
 
+from threat_planner.core.geo.frames import Datum
+from threat_planner.core.inputs.geodetic import dem_terrain, frame_of, to_local
 from threat_planner.core.inputs.yaml_threats import load_document
 from threat_planner.core.world.airspace import Airspace
 from threat_planner.core.world.threats import Box, check_endpoints, ThreatField
@@ -46,6 +54,8 @@ class Scenario:
         start: Start point (3,) [m].
         goal: Goal point (3,) [m].
         threats: The threat field.
+        airspace: No-fly zones and terrain.
+        datum: WGS84 origin of the frame (East-North-Up), or None.
     """
 
     name: str
@@ -56,11 +66,13 @@ class Scenario:
     goal: np.ndarray
     threats: ThreatField
     airspace: Airspace = field(default_factory=Airspace)
+    datum: Optional[Datum] = None
 
     def to_dict(self) -> dict:
-        """Return the scenario in the YAML file layout."""
+        """Return the scenario in the YAML file layout (local coordinates)."""
         out = {
             'name': self.name, 'frame_id': self.frame_id, 'description': self.description,
+            **({} if self.datum is None else {'datum': self.datum.as_list()}),
             'bounds': {'min': self.box.lo.tolist(), 'max': self.box.hi.tolist()},
             'start': self.start.tolist(), 'goal': self.goal.tolist(),
             'threats': [{'position': p.tolist(), 'intensity': float(f)}
@@ -77,7 +89,8 @@ class Scenario:
 
 #: Keys a scenario file may hold; the airspace keys are read by the airspace layer.
 TOP_KEYS = ('name', 'frame_id', 'description', 'bounds', 'start', 'goal', 'threats',
-            'threats_file', 'no_fly_zones', 'terrain', 'lethal_radius')
+            'threats_file', 'no_fly_zones', 'terrain', 'lethal_radius', 'datum',
+            'coordinates')
 #: Suffixes a ``threats_file`` may have.
 THREATS_FILE_SUFFIXES = ('.npy', '.csv')
 BOUNDS_KEYS = ('min', 'max')
@@ -212,16 +225,29 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
     base = None if source.startswith('<') else Path(source).parent
     positions, intensities, lethal = _threat_rows(data, base, fail)
     try:
+        datum, geodetic = frame_of(data)
+        xyz = '[lat, lon, h]' if geodetic else '[x, y, z]'
         for i, p in enumerate(positions if isinstance(positions, list) else ()):
             if not isinstance(p, (list, tuple)) or len(p) != 3:
-                raise InputError(f'threats[{i}].position: expected [x, y, z], got {p!r}')
-        box = Box.from_corners(bounds['min'], bounds['max'])
+                raise InputError(f'threats[{i}].position: expected {xyz}, got {p!r}')
+        air = {k: data[k] for k in ('no_fly_zones', 'terrain') if k in data}
+        ends = data['start'], data['goal']
+        if geodetic:
+            local = to_local(data, positions, datum,
+                             'threats_file' if 'threats_file' in data else 'threats')
+            box, positions, ends = local['bounds'], local['positions'], (local['start'],
+                                                                         local['goal'])
+            if 'no_fly_zones' in air:
+                air['no_fly_zones'] = local['no_fly_zones']
+        else:
+            box = Box.from_corners(bounds['min'], bounds['max'])
+        if isinstance(air.get('terrain'), dict) and 'dem' in air['terrain']:
+            air['terrain'] = dem_terrain(air['terrain'], datum, box, base)
         threat_field = ThreatField.from_arrays(
             np.array(positions, dtype=float).reshape(-1, 3), np.array(intensities, dtype=float))
-        start, goal = check_endpoints(data['start'], data['goal'], box, threat_field)
+        start, goal = check_endpoints(*ends, box, threat_field)
         airspace = Airspace.from_mapping(
-            {k: data[k] for k in ('no_fly_zones', 'terrain') if k in data}, base,
-            lethal_radii=[float('nan') if r is None else r for r in lethal],
+            air, base, lethal_radii=[float('nan') if r is None else r for r in lethal],
             threat_positions=threat_field.positions)
         airspace.check_point('start', start)
         airspace.check_point('goal', goal)
@@ -231,7 +257,7 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
         raise fail(f'bad value ({exc})') from None
     return Scenario(str(data.get('name', Path(source).stem)), str(data.get('frame_id', 'map')),
                     str(data.get('description', '') or ''), box, start, goal, threat_field,
-                    airspace)
+                    airspace, datum)
 
 
 def load_scenario(path: str | Path) -> Scenario:
