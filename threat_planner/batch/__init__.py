@@ -1,0 +1,1 @@
+"""Batch studies (``threat-planner batch``): study, tasks, backends, results; imports core only."""
