@@ -16,6 +16,7 @@ import sys
 import threading
 
 from threat_planner.cli.bag import add_bag_commands
+from threat_planner.cli.exports import add_export_options, check_exports, export_plan
 from threat_planner.cli.options import add_planner_options, config_from, overrides, ProgressBar
 from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan
@@ -32,6 +33,7 @@ class _Parser(argparse.ArgumentParser):
 def _cmd_plan(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     cfg = config_from(args)
+    check_exports(args, scenario)
     progress = ProgressBar('sweep')
     if args.record:
         from threat_planner.ros.recording.record import record_plan
@@ -57,8 +59,11 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     print(f'  time: {result.timings_ms["total_ms"]:.1f} ms ({stages} ms)')
     if args.record:
         print(f'  recorded: {recording}')
+    summary = result.summary() if args.json else None
+    for line in export_plan(args, scenario, result, cfg, summary):
+        print(line)
     if args.json:
-        Path(args.json).write_text(json.dumps(result.summary(), indent=1))
+        Path(args.json).write_text(json.dumps(summary, indent=1))
     if args.plot:
         from threat_planner.cli.figures import plot_plan
         plot_plan(args.plot, scenario.threats, scenario.box, scenario.start, scenario.goal,
@@ -116,6 +121,13 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0 if report.ok else 1
 
 
+def _cmd_compile(args: argparse.Namespace) -> int:
+    from threat_planner.core.compiled import compile_all, ensure_compiled
+    report = ensure_compiled() if args.check else compile_all()
+    print(report.line())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser of ``threat-planner``."""
     parser = _Parser(prog='threat-planner',
@@ -134,6 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help='record the run to MCAP as the planner node would (parameters, '
                              'start, goal_pose, threats as float32 PointCloud2, and the '
                              'outputs); the plan is made from the float32 threats')
+    add_export_options(p_plan)
     p_plan.set_defaults(func=_cmd_plan)
 
     p_paper = sub.add_parser('paper', help="reproduce the paper's Section IV on a scenario")
@@ -168,6 +181,13 @@ def build_parser() -> argparse.ArgumentParser:
     live.add_argument('--timeout', type=float, default=30.0,
                       help='longest wait for the node and for its last answer [s]')
     p_replay.set_defaults(func=_cmd_replay)
+
+    p_compile = sub.add_parser(
+        'compile', help='compile the kernels into the cache now (make venv and colcon build '
+                        'do it; tens of seconds once per install, then every process loads them)')
+    p_compile.add_argument('--check', action='store_true',
+                           help='only load the kernels the cache holds, compiling what it lacks')
+    p_compile.set_defaults(func=_cmd_compile)
     add_bag_commands(sub)
     return parser
 
