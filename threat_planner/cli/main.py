@@ -1,4 +1,4 @@
-"""Command line: ``threat-planner plan | paper | replay | bag``.
+"""Command line: ``threat-planner plan | paper | replay | batch | bag``.
 
 Errors in the user's input (a bad scenario file, a bad option value) exit with status 2 and
 one line on stderr, never a traceback.
@@ -16,6 +16,8 @@ import sys
 import threading
 
 from threat_planner.cli.bag import add_bag_commands
+from threat_planner.cli.batch import (add_batch_command, add_robust_options, robust_plan,
+                                     robust_summary)
 from threat_planner.cli.exports import add_export_options, check_exports, export_plan
 from threat_planner.cli.options import add_planner_options, config_from, overrides, ProgressBar
 from threat_planner.core.inputs.scenario import load_scenario
@@ -35,7 +37,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     cfg = config_from(args)
     check_exports(args, scenario)
     progress = ProgressBar('sweep')
-    if args.record:
+    if args.robust is not None:
+        result = robust_plan(scenario, cfg, args, progress)
+    elif args.record:
         from threat_planner.ros.recording.record import record_plan
         result, recording = record_plan(scenario, cfg, args.record, progress=progress)
     else:
@@ -57,9 +61,15 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         print(f'  clearance: zones {result.clearance.zones_m:.3f} m, terrain '
               f'{result.clearance.terrain_m:.3f} m above the floor')
     print(f'  time: {result.timings_ms["total_ms"]:.1f} ms ({stages} ms)')
+    robust = {}
+    if args.robust is not None:
+        line, robust['robust'] = robust_summary(scenario, result, args)
+        print(line)
     if args.record:
         print(f'  recorded: {recording}')
     summary = result.summary() if args.json else None
+    if summary is not None:
+        summary.update(robust)
     for line in export_plan(args, scenario, result, cfg, summary):
         print(line)
     if args.json:
@@ -147,6 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
                              'start, goal_pose, threats as float32 PointCloud2, and the '
                              'outputs); the plan is made from the float32 threats')
     add_export_options(p_plan)
+    add_robust_options(p_plan)
     p_plan.set_defaults(func=_cmd_plan)
 
     p_paper = sub.add_parser('paper', help="reproduce the paper's Section IV on a scenario")
@@ -188,6 +199,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_compile.add_argument('--check', action='store_true',
                            help='only load the kernels the cache holds, compiling what it lacks')
     p_compile.set_defaults(func=_cmd_compile)
+    add_batch_command(sub)
     add_bag_commands(sub)
     return parser
 
