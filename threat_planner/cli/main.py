@@ -17,7 +17,7 @@ import threading
 
 from threat_planner.cli.bag import add_bag_commands
 from threat_planner.cli.batch import (add_batch_command, add_robust_options, robust_plan,
-                                     robust_summary)
+                                      robust_summary)
 from threat_planner.cli.exports import add_export_options, check_exports, export_plan
 from threat_planner.cli.options import add_planner_options, config_from, overrides, ProgressBar
 from threat_planner.core.inputs.scenario import load_scenario
