@@ -12,7 +12,7 @@ $(STAMP): setup.py setup.cfg package.xml
 	@echo "[2/3] upgrading pip"
 	$(BIN)/pip install --progress-bar on --upgrade pip
 	@echo "[3/3] installing threat_planner with ROS 2 wheels (about a minute)"
-	$(BIN)/pip install --progress-bar on -e '.[ros,record,test,bench]'
+	$(BIN)/pip install --progress-bar on -e '.[ros,record,test,bench,cluster]'
 	touch $(STAMP)
 
 venv: $(STAMP)

@@ -18,7 +18,7 @@ setup(
         ('share/' + package_name + '/scenarios', glob('test/data/*.yaml')),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'networkx', 'PyYAML', 'matplotlib', 'tqdm',
-                      'threadpoolctl', 'numba'],
+                      'threadpoolctl', 'numba', 'pyarrow'],
     extras_require={
         'ros': [
             'ros-jazzy-rclpy[fastrtps]',
@@ -34,6 +34,8 @@ setup(
         'test': ['pytest', 'hypothesis', 'flake8', 'pydocstyle', 'rosbags', 'colcon-core',
                  'colcon-ros', 'colcon-python-setup-py'],
         'bench': ['ompl'],
+        # threat-planner batch --ray (the tests start a local Ray cluster too)
+        'cluster': ['ray'],
     },
     zip_safe=True,
     maintainer='threat_planner maintainers',
