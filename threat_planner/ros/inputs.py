@@ -25,8 +25,8 @@ from threat_planner.core.world.zones import Zone
 from threat_planner.errors import InputError
 from threat_planner.ros.airspace_input import (airspace_of, check_airspace_endpoints,
                                                load_airspace_file)
-from threat_planner.ros.conversions import (point_from_pose_stamped, threats_from_pointcloud2,
-                                            threats_from_pose_array)
+from threat_planner.ros.conversions import (point_from_navsatfix, point_from_pose_stamped,
+                                            threats_from_pointcloud2, threats_from_pose_array)
 from threat_planner.ros.conversions.airspace import terrain_from_image, zones_from_markers
 from threat_planner.ros.parameters import NodeSettings, settings_from_parameters
 
@@ -35,7 +35,7 @@ __all__ = ['INPUT_KINDS', 'InputState', 'NO_THREATS', 'accept', 'input_stamp']
 NO_THREATS = ThreatField.from_arrays(np.zeros((0, 3)), np.zeros(0))
 #: What :func:`accept` takes: the node's input topics and ``'parameters'``.
 INPUT_KINDS = ('threats', 'threat_poses', 'start', 'goal_pose', 'no_fly_zones', 'terrain',
-               'parameters')
+               'start_fix', 'goal_fix', 'parameters')
 #: Parameters that describe the grid of a height map received on topic ``terrain``.
 _TERRAIN_GRID = ('terrain_origin', 'terrain_resolution', 'terrain_clearance',
                  'terrain_masking')
@@ -171,13 +171,16 @@ def _accept(state: InputState, kind: str, msg) -> InputState:
         return replace(state, values=values, settings=settings, threats=threats,
                        start=start, goal=goal, zones=zones, terrain=terrain,
                        terrain_from_topic=from_topic)
-    if kind == 'start':
-        start = point_from_pose_stamped(msg, s.frame_id, 'start')
+    if kind in ('start', 'start_fix'):
+        # geo (issue 26): a NavSatFix is converted with parameter datum, then taken alike
+        start = (point_from_pose_stamped(msg, s.frame_id, 'start') if kind == 'start'
+                 else point_from_navsatfix(msg, s.datum, kind))
         check_endpoints(start, state.goal, s.box, state.known_threats)
         check_airspace_endpoints(start, state.goal, state.airspace)
         return replace(state, start=start)
-    if kind == 'goal_pose':
-        goal = point_from_pose_stamped(msg, s.frame_id, 'goal_pose')
+    if kind in ('goal_pose', 'goal_fix'):
+        goal = (point_from_pose_stamped(msg, s.frame_id, 'goal_pose') if kind == 'goal_pose'
+                else point_from_navsatfix(msg, s.datum, kind))
         check_endpoints(state.start, goal, s.box, state.known_threats)
         check_airspace_endpoints(state.start, goal, state.airspace)
         return replace(state, goal=goal)

@@ -5,7 +5,10 @@ inputs (and the airspace inputs ``no_fly_zones`` and ``terrain``, also whole) su
 transient local like a map: a node started after a latched publisher still
 gets the current picture, and a volatile threat publisher is reported by rclpy as
 incompatible QoS. Start and goal subscribe volatile so that RViz's pose tools (volatile
-publishers) work. Outputs are latched (RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1).
+publishers) work. The GNSS fixes ``start_fix`` and ``goal_fix`` subscribe best effort:
+GNSS drivers publish sensor data best effort, which a reliable subscription would not
+match, and a best-effort one takes reliable publishers too. Outputs are latched
+(RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1).
 """
 
 from __future__ import annotations
@@ -14,8 +17,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from threat_planner.bag.qos import TopicQos
 
-__all__ = ['INPUT_TOPICS', 'LATCHED', 'NODE_NAME', 'OUTPUT_TOPICS', 'PARAMETER_EVENTS_QOS',
-           'PARAMETER_EVENTS_TOPIC', 'PARAMETER_EVENT_TYPE', 'POSE_INPUT', 'THREAT_INPUT']
+__all__ = ['FIX_INPUT', 'INPUT_TOPICS', 'LATCHED', 'NODE_NAME', 'OUTPUT_TOPICS',
+           'PARAMETER_EVENTS_QOS', 'PARAMETER_EVENTS_TOPIC', 'PARAMETER_EVENT_TYPE',
+           'POSE_INPUT', 'THREAT_INPUT']
 
 NODE_NAME = 'threat_planner'
 
@@ -31,6 +35,10 @@ THREAT_INPUT = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
 POSE_INPUT = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE,
                         history=HistoryPolicy.KEEP_LAST, depth=10)
+#: GNSS fixes: best effort, as GNSS drivers publish.
+FIX_INPUT = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT,
+                       durability=DurabilityPolicy.VOLATILE,
+                       history=HistoryPolicy.KEEP_LAST, depth=10)
 #: rclpy's parameter events QoS, for the recording's channel metadata.
 PARAMETER_EVENTS_QOS = TopicQos(reliability='reliable', durability='volatile',
                                 history='keep_last', depth=1000)
@@ -46,6 +54,9 @@ INPUT_TOPICS = {
     # airspace (issue 12): latched state like the threat picture (ros/conversions/airspace.py)
     'no_fly_zones': ('visualization_msgs/msg/MarkerArray', THREAT_INPUT),
     'terrain': ('sensor_msgs/msg/Image', THREAT_INPUT),
+    # geo (issue 26): sensor_msgs/NavSatFix, converted into frame_id with parameter datum
+    'start_fix': ('sensor_msgs/msg/NavSatFix', FIX_INPUT),
+    'goal_fix': ('sensor_msgs/msg/NavSatFix', FIX_INPUT),
 }
 #: The node's outputs: topic name (relative) -> (type, publisher QoS).
 OUTPUT_TOPICS = {

@@ -10,6 +10,7 @@ topic                     type                                QoS
 ``threat_poses`` (in)     geometry_msgs/PoseArray             reliable, transient local, 10
 ``start`` (in)            geometry_msgs/PoseStamped           reliable, volatile, 10
 ``goal_pose`` (in)        geometry_msgs/PoseStamped           reliable, volatile, 10
+``start_fix``, ``goal_fix`` sensor_msgs/NavSatFix (``datum``)  best effort, volatile, 10
 ``no_fly_zones`` (in)     visualization_msgs/MarkerArray      reliable, transient local, 10
 ``terrain`` (in)          sensor_msgs/Image (32FC1)           reliable, transient local, 10
 ``initial_path`` (out)    nav_msgs/Path (Dijkstra path)       reliable, transient local, 1
@@ -57,18 +58,20 @@ from nav_msgs.msg import Path
 from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import Image, PointCloud2
+from sensor_msgs.msg import Image, NavSatFix, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
 from threat_planner.bag import McapRecorder
+from threat_planner.core.compiled import ensure_compiled
 from threat_planner.errors import InputError, RecordingError
 from threat_planner.ros.conversions import plan_info_msg
 from threat_planner.ros.inputs import accept, input_stamp, InputState
 from threat_planner.ros.interface import (INPUT_TOPICS, LATCHED, NODE_NAME, OUTPUT_TOPICS,
-                                          PARAMETER_EVENT_TYPE, PARAMETER_EVENTS_QOS,
-                                          PARAMETER_EVENTS_TOPIC, POSE_INPUT, THREAT_INPUT)
+                                          FIX_INPUT, PARAMETER_EVENT_TYPE,
+                                          PARAMETER_EVENTS_QOS, PARAMETER_EVENTS_TOPIC,
+                                          POSE_INPUT, THREAT_INPUT)
 from threat_planner.ros.outputs import input_values, outcome_messages, PlanOutcome, PlanRequest
-from threat_planner.ros.parameters import descriptor, PARAMETER_DEFAULTS, PLANNING_PARAMETERS
+from threat_planner.ros.parameters import declare_all, PARAMETER_DEFAULTS, PLANNING_PARAMETERS
 from threat_planner.ros.plan_service import PlanService
 from threat_planner.ros.process import run_node
 from threat_planner.ros.worker import ProcessPlanWorker
@@ -107,8 +110,7 @@ class ThreatPlannerNode(Node):
     # -- set-up steps, shared with the managed node (issue 13: ros/lifecycle.py) ------
 
     def _declare_parameters(self) -> None:
-        for name, default in PARAMETER_DEFAULTS.items():
-            self.declare_parameter(name, default, descriptor(name))
+        declare_all(self)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
@@ -127,6 +129,7 @@ class ThreatPlannerNode(Node):
         self._closed = False
         self._subs: dict = {}
         self._guard = self.create_guard_condition(self._publish_outcomes)
+        self._load_kernels()
         # reliability (issue 14): plans run in a child process, the executor stays free.
         self._worker = ProcessPlanWorker(self._hand_over, name='threat_planner_worker')
         if self._state.settings.record:
@@ -162,7 +165,20 @@ class ThreatPlannerNode(Node):
                 THREAT_INPUT),
             'terrain': self.create_subscription(
                 Image, 'terrain', lambda m: self._receive('terrain', m), THREAT_INPUT),
+            # geo (issue 26): GNSS fixes, converted with parameter datum
+            **{k: self.create_subscription(NavSatFix, k, lambda m, k=k: self._receive(k, m),
+                                           FIX_INPUT) for k in ('start_fix', 'goal_fix')},
         }
+
+    def _load_kernels(self) -> None:
+        """Load (or, once per install, compile) the kernels before any input can arrive.
+
+        The GetPlan service plans in this process and the worker children load from the
+        cache this fills, so neither the first request nor the first picture waits on it.
+        """
+        report = ensure_compiled()
+        log = self.get_logger().info if report.compiled else self.get_logger().debug
+        log(f'kernels: {report.line()}')
 
     def _log_ready(self) -> None:
         settings = self._state.settings

@@ -9,20 +9,22 @@ Every parameter, its default, range, unit and help come from
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Mapping, Optional
 
 import numpy as np
 from numpy.typing import NDArray
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
+from rclpy.parameter import Parameter
 
+from threat_planner.core.geo.frames import Datum
 from threat_planner.core.inputs.config import PlannerConfig
 from threat_planner.core.inputs.settings import NODE_SETTINGS
 from threat_planner.core.world.threats import as_point, Box
 from threat_planner.errors import InputError
 
 __all__ = ['CONFIG_FIELDS', 'NodeSettings', 'PARAMETER_DEFAULTS', 'PLANNING_PARAMETERS',
-           'as_declared', 'descriptor', 'settings_from_parameters']
+           'as_declared', 'declare_all', 'descriptor', 'settings_from_parameters']
 
 
 def _copy(value: object) -> object:
@@ -74,6 +76,8 @@ class NodeSettings:
         Pixel spacing and smallest height above such a height map [m].
     terrain_masking : bool
         Whether such a height map masks the radars.
+    datum : Datum or None
+        WGS84 origin of frame_id, for NavSatFix inputs; None when parameter datum is [].
 
     """
 
@@ -92,6 +96,7 @@ class NodeSettings:
     terrain_resolution: float = 10.0
     terrain_clearance: float = 0.0
     terrain_masking: bool = False
+    datum: Optional[Datum] = None
 
 
 def _numbers(name: str, value: object, count: int, what: str) -> NDArray:
@@ -148,6 +153,9 @@ def settings_from_parameters(values: Mapping[str, object]) -> NodeSettings:
                  'terrain_masking', 'warm_replan'):
         NODE_SETTINGS[name].check(values[name])
     origin = _numbers('terrain_origin', values['terrain_origin'], 2, '[x, y]')
+    raw = values.get('datum', [])
+    datum = None if raw is None or (hasattr(raw, '__len__') and len(raw) == 0) else \
+        Datum.parse(_numbers('datum', raw, 3, '[] or [lat, lon, h]'))
     return NodeSettings(config=config, box=box, frame_id=values['frame_id'], start=start,
                         goal=goal, default_intensity=float(values['default_intensity']),
                         max_threats=int(values['max_threats']),
@@ -158,7 +166,20 @@ def settings_from_parameters(values: Mapping[str, object]) -> NodeSettings:
                         terrain_resolution=float(values['terrain_resolution']),
                         terrain_clearance=float(values['terrain_clearance']),
                         terrain_masking=bool(values['terrain_masking']),
-                        warm_replan=bool(values['warm_replan']))
+                        warm_replan=bool(values['warm_replan']), datum=datum)
+
+
+def declare_all(node) -> None:
+    """Declare every parameter on `node` (an rclpy Node) with its default and descriptor."""
+    for name, default in PARAMETER_DEFAULTS.items():
+        if default != []:
+            node.declare_parameter(name, default, descriptor(name))
+            continue
+        # geo (issue 26): rclpy types an empty default as a byte array, and a params
+        # file's [] arrives unset: declared as a float array, then set empty.
+        node.declare_parameter(name, Parameter.Type.DOUBLE_ARRAY, descriptor(name))
+        if node.get_parameter_or(name).type_ == Parameter.Type.NOT_SET:
+            node.set_parameters([Parameter(name, Parameter.Type.DOUBLE_ARRAY, [])])
 
 
 def descriptor(name: str) -> ParameterDescriptor:

@@ -57,6 +57,8 @@ class Setting:
         Command-line option (without ``--``), or None for none.
     non_empty : bool
         A string that must not be blank.
+    empty_ok : bool
+        A float array that may also be empty (``[]`` = none).
 
     """
 
@@ -75,6 +77,7 @@ class Setting:
     node: bool = True
     cli: Optional[str] = None
     non_empty: bool = False
+    empty_ok: bool = False
 
     @property
     def rule(self) -> str:
@@ -86,7 +89,7 @@ class Setting:
         if self.kind is bool:
             return 'must be true or false'
         if self.kind is list:
-            return f'{self.length} finite numbers'
+            return f'{self.length} finite numbers' + (' or none' if self.empty_ok else '')
         lo = '<' if self.lo_open else '<='
         hi = '<' if self.hi_open else '<='
         if self.lo_open and self.hi_open and self.lo is not None and self.hi is not None:
@@ -230,6 +233,11 @@ SETTINGS: tuple[Setting, ...] = (
     Setting('frame_id', str, 'map',
             'Frame of every input and output; inputs in another frame are refused',
             scope='node', non_empty=True),
+    # geo (issue 26): what ties frame_id to WGS84, for the NavSatFix inputs.
+    Setting('datum', list, [],
+            'WGS84 origin [lat, lon, h] of frame_id (East-North-Up, h above the ellipsoid), '
+            "for NavSatFix inputs on start_fix and goal_fix; [] = none", unit='deg, deg, m',
+            length=3, scope='node', empty_ok=True),
     Setting('start', list, [0.0, 0.0, 50.0],
             'Start [x, y, z], used until a start message arrives; setting it replaces the '
             'current start', unit='m', length=3, scope='node'),

@@ -12,7 +12,7 @@ REP-103 (x forward, y left, z up; a positive pitch about y points the nose down)
 One module per message family: :mod:`._common` (stamps, headers, shared checks),
 :mod:`.cloud` (PointCloud2), :mod:`.poses` (PoseArray, PoseStamped), :mod:`.paths` (Path),
 :mod:`.markers` (MarkerArray), :mod:`.diagnostics` (DiagnosticArray), :mod:`.airspace`
-(no-fly zones as MarkerArray, terrain as Image).
+(no-fly zones as MarkerArray, terrain as Image), :mod:`.fix` (NavSatFix).
 """
 
 from threat_planner.ros.conversions._common import ns_to_stamp, stamp_to_ns
@@ -21,6 +21,7 @@ from threat_planner.ros.conversions.airspace import (image_from_terrain, terrain
 from threat_planner.ros.conversions.cloud import pointcloud2_from_threats, threats_from_pointcloud2
 from threat_planner.ros.conversions.diagnostics import (PLAN_STATUS_NAME, plan_info_msg,
                                                         plan_info_values)
+from threat_planner.ros.conversions.fix import navsatfix_from_geodetic, point_from_navsatfix
 from threat_planner.ros.conversions.markers import network_markers, SPHERES_PER_THREAT_MAX
 from threat_planner.ros.conversions.paths import path_from_msg, path_to_msg
 from threat_planner.ros.conversions.poses import point_from_pose_stamped, threats_from_pose_array
@@ -29,12 +30,14 @@ __all__ = [
     'PLAN_STATUS_NAME',
     'SPHERES_PER_THREAT_MAX',
     'image_from_terrain',
+    'navsatfix_from_geodetic',
     'network_markers',
     'ns_to_stamp',
     'path_from_msg',
     'path_to_msg',
     'plan_info_msg',
     'plan_info_values',
+    'point_from_navsatfix',
     'point_from_pose_stamped',
     'pointcloud2_from_threats',
     'stamp_to_ns',

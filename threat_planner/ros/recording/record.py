@@ -61,6 +61,7 @@ def _scenario_parameters(scenario: Scenario, config: PlannerConfig,
     values['goal'] = [float(v) for v in scenario.goal]
     values['frame_id'] = scenario.frame_id
     values['record'] = record
+    values['datum'] = [] if scenario.datum is None else scenario.datum.as_list()
     terrain = scenario.airspace.terrain
     if terrain is not None:   # airspace (issue 12): the grid of the terrain Image
         values['terrain_origin'] = [float(v) for v in terrain.origin]
@@ -130,8 +131,11 @@ def record_plan(scenario: Scenario, config: PlannerConfig, target, *,
         rec.add_topic(PARAMETER_EVENTS_TOPIC, PARAMETER_EVENT_TYPE, PARAMETER_EVENTS_QOS)
         t = time.time_ns()
         event = ParameterEvent(stamp=ns_to_stamp(t), node=f'/{NODE_NAME}')
-        event.new_parameters = [Parameter(n, value=v).to_parameter_msg()
-                                for n, v in values.items()]
+        # Float arrays typed as declared: an empty one (datum) would read as bytes.
+        event.new_parameters = [
+            (Parameter(n, Parameter.Type.DOUBLE_ARRAY, [float(x) for x in v])
+             if isinstance(v, list) else Parameter(n, value=v)).to_parameter_msg()
+            for n, v in values.items()]
         rec.write(PARAMETER_EVENTS_TOPIC, event, log_time_ns=t)
 
         # The inputs, as threat_publisher sends them: start, goal, then the picture; each
