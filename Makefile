@@ -7,12 +7,14 @@ STAMP := $(VENV)/.installed
 .PHONY: venv demo plan-demo test bench clean
 
 $(STAMP): setup.py setup.cfg package.xml
-	@echo "[1/3] creating $(VENV)"
+	@echo "[1/4] creating $(VENV)"
 	$(PYTHON) -m venv $(VENV)
-	@echo "[2/3] upgrading pip"
+	@echo "[2/4] upgrading pip"
 	$(BIN)/pip install --progress-bar on --upgrade pip
-	@echo "[3/3] installing threat_planner with ROS 2 wheels (about a minute)"
+	@echo "[3/4] installing threat_planner with ROS 2 wheels (about a minute)"
 	$(BIN)/pip install --progress-bar on -e '.[ros,record,test,bench,cluster]'
+	@echo "[4/4] compiling the kernels into the cache (once per install, 30-70 s)"
+	$(BIN)/threat-planner compile
 	touch $(STAMP)
 
 venv: $(STAMP)

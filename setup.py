@@ -1,8 +1,50 @@
 from glob import glob
+import os
+import subprocess
+import sys
 
 from setuptools import find_packages, setup
+from setuptools.command.build_py import build_py
+from setuptools.command.develop import develop
 
 package_name = 'threat_planner'
+
+
+def compile_kernels(where):
+    """Compile the numba kernels into the user cache from the package at `where`.
+
+    The cache is keyed by the kernels' contents, not their path, so what this compiles
+    serves every install of the same sources (colcon, pip, the checkout). Where numba is
+    not importable (pip's isolated build environment) or THREAT_PLANNER_NO_COMPILE is
+    set, it says so and the build goes on: the first plan then compiles.
+    """
+    if os.environ.get('THREAT_PLANNER_NO_COMPILE'):
+        return
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(where)] + [p for p in [os.environ.get('PYTHONPATH')] if p]))
+    code = subprocess.call([sys.executable, '-c',
+                            'from threat_planner.core.compiled import compile_all; '
+                            'print("threat_planner:", compile_all().line())'], env=env)
+    if code:
+        print('threat_planner: kernels not compiled at build time (numba not importable '
+              'here); run `threat-planner compile` once after installing', file=sys.stderr)
+
+
+class BuildAndCompile(build_py):
+    """``build_py`` (setup.py build, colcon build, pip wheel), then compile the kernels."""
+
+    def run(self):
+        super().run()
+        compile_kernels(os.path.abspath(self.build_lib))
+
+
+class DevelopAndCompile(develop):
+    """``develop`` (colcon build --symlink-install), then compile the kernels."""
+
+    def run(self):
+        super().run()
+        compile_kernels(os.path.dirname(os.path.abspath(__file__)))
+
 
 setup(
     name=package_name,
@@ -37,6 +79,7 @@ setup(
         # threat-planner batch --ray (the tests start a local Ray cluster too)
         'cluster': ['ray'],
     },
+    cmdclass={'build_py': BuildAndCompile, 'develop': DevelopAndCompile},
     zip_safe=True,
     maintainer='threat_planner maintainers',
     maintainer_email='maintainers@users.noreply.h-seed-a7c681e7.example',

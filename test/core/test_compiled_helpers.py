@@ -86,17 +86,17 @@ def test_the_kernel_cache_is_named_by_every_compiled_module():
     """A module compiled with cache=True outside the hash could load a stale callee."""
     from pathlib import Path
 
-    import numba
-
-    import threat_planner.core.cost.kernels  # noqa: F401 - configures the cache
     from threat_planner.core import _numba_cache
+    from threat_planner.core.cost import kernels
 
     core = Path(_numba_cache.__file__).parent
     compiled = {p.relative_to(core).as_posix() for p in core.rglob('*.py')
                 if '@njit(cache=True' in p.read_text()}
     assert compiled and compiled <= set(_numba_cache.SOURCES)
-    assert numba.config.CACHE_DIR == str(_numba_cache.cache_dir())
-    assert _numba_cache.cache_dir().name != ''
+    # every kernel's cache lives in the folder of this hash, under its place in the package
+    where = Path(kernels._kernel._cache._cache_path)
+    assert where == _numba_cache.cache_dir() / 'cost'
+    assert _numba_cache.cache_dir().name == _numba_cache.sources_digest() != ''
 
 
 @pytest.mark.parametrize('first, env, sees', [('', '', False), ('import coverage', '', True),

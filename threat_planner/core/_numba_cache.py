@@ -1,21 +1,33 @@
-"""Where numba keeps the compiled kernels: a folder named by a hash of their sources.
+"""Where numba keeps the compiled kernels: a folder named by a hash of their contents.
 
-numba checks a cached function against its own source file only. The kernels call one
-another across files (:mod:`.optimise.lbfgs` inlines :mod:`.cost.kernels` and
-:mod:`.optimise.limit_kernels`),
-so after an edit or an upgrade that changed only a callee, a caller's stale machine code
-was loaded: it crashed the planner with a segmentation fault twice during development.
-Naming the cache folder by a hash of every compiled module (and of :mod:`.cost.closed_form`,
-whose constants are compiled in) makes any change start a fresh cache.
+Two things differ from numba's own cache (which keys a function by its source file's
+absolute path and checks it against that file only):
+
+* The folder is named by a hash of every compiled module (and of :mod:`.cost.closed_form`,
+  whose constants are compiled in). The kernels call one another across files
+  (:mod:`.optimise.lbfgs` inlines :mod:`.cost.kernels` and :mod:`.optimise.limit_kernels`),
+  so after an edit that changed only a callee a caller's stale machine code was loaded:
+  it crashed the planner with a segmentation fault twice during development.
+* Inside it, a kernel's place is its module's path inside the package, not on the disk,
+  so every copy of the same sources shares one cache: the editable checkout of
+  ``make venv``, a colcon install, a pip install, a fresh clone. A kernel compiled once on
+  this machine (``threat-planner compile``, which ``make venv`` and ``setup.py build``
+  run) is loaded by all of them.
+
+A folder that cannot be written falls back to one under the temporary directory; an
+unreadable or corrupt cache file counts as a miss (the kernel compiles again), never as
+an error.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib
 import os
 from pathlib import Path
 import sys
+import tempfile
 
 #: The modules compiled with ``cache=True`` and the ones whose constants they compile in.
 SOURCES = ('cost/closed_form.py', 'cost/pair_integrals.py', 'cost/kernels.py',
@@ -23,24 +35,116 @@ SOURCES = ('cost/closed_form.py', 'cost/pair_integrals.py', 'cost/kernels.py',
            'optimise/limit_kernels.py', 'optimise/lagrangian_kernels.py', 'optimise/limits.py',
            'optimise/chain_kernels.py')
 
+_CORE = Path(__file__).resolve().parent
+_configured = False
 
-def cache_dir() -> Path:
-    """Return the cache folder: ``$NUMBA_CACHE_DIR`` or the user cache, then the hash."""
-    here = Path(__file__).resolve().parent
+
+@functools.lru_cache(maxsize=None)
+def sources_digest() -> str:
+    """Return the hash naming the cache folder: of :data:`SOURCES`' contents, 16 hex."""
     digest = hashlib.sha1()
     for name in SOURCES:
-        digest.update((here / name).read_bytes())
-    base = os.environ.get('NUMBA_CACHE_DIR') or os.path.join(
+        digest.update(name.encode())
+        digest.update((_CORE / name).read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def cache_root() -> Path:
+    """Return the base folder: ``$THREAT_PLANNER_CACHE_DIR``, ``$NUMBA_CACHE_DIR``, the user's."""
+    if os.environ.get('THREAT_PLANNER_CACHE_DIR'):
+        return Path(os.environ['THREAT_PLANNER_CACHE_DIR'])
+    if os.environ.get('NUMBA_CACHE_DIR'):
+        return Path(os.environ['NUMBA_CACHE_DIR']) / 'threat_planner'
+    base = os.path.join(
         os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache'),
         'threat_planner', 'numba')
-    return Path(base) / digest.hexdigest()[:16]
+    return Path(base)
+
+
+def cache_dir() -> Path:
+    """Return the folder of this set of sources: :func:`cache_root` / the sources' hash."""
+    return cache_root() / sources_digest()
+
+
+def fallback_dir() -> Path:
+    """Return the folder used where :func:`cache_dir` cannot be written."""
+    uid = os.getuid() if hasattr(os, 'getuid') else 'user'
+    return Path(tempfile.gettempdir()) / f'threat_planner-numba-{uid}' / sources_digest()
+
+
+def _writable(path: Path) -> bool:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=path).close()
+        return True
+    except OSError:
+        return False
+
+
+def _make_locator():
+    """Return the locator class (built here: numba's base classes are imported lazily)."""
+    from numba.core import caching
+
+    class PackageLocator(caching._SourceFileBackedLocatorMixin, caching._CacheLocator):
+        """Cache of a kernel of this package, placed by its path inside the package."""
+
+        def __init__(self, py_func, py_file: str, path: Path) -> None:
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+            self._path = str(path)
+
+        def get_cache_path(self) -> str:
+            return self._path
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            try:
+                inner = Path(py_file).resolve().relative_to(_CORE)
+            except (OSError, ValueError):
+                return None  # not ours: numba's own locators take it
+            for base in (cache_dir(), fallback_dir()):
+                folder = base / inner.parent
+                if _writable(folder):
+                    return cls(py_func, py_file, folder)
+            return None
+
+    return PackageLocator
+
+
+def _ours(cache_file) -> bool:
+    return str(getattr(cache_file, '_cache_path', '')).startswith(
+        (str(cache_root()), str(fallback_dir().parent)))
+
+
+def _tolerant(method, on_error):
+    """Wrap an IndexDataCacheFile method: an error on one of our files is a miss."""
+    @functools.wraps(method)
+    def wrapper(self, *args):
+        try:
+            return method(self, *args)
+        except FileNotFoundError:
+            raise
+        except Exception:  # noqa: BLE001 - a damaged cache file must never stop a plan
+            if not _ours(self):
+                raise
+            return on_error()
+    return wrapper
 
 
 def configure() -> None:
-    """Point numba's cache at :func:`cache_dir` (before any kernel is decorated)."""
-    from numba import config
-    # numba falls back to its own locations where this folder cannot be written.
-    config.CACHE_DIR = str(cache_dir())
+    """Put :func:`_make_locator`'s class first (before any kernel is decorated)."""
+    global _configured
+    if _configured:
+        return
+    from numba.core import caching
+    impl = getattr(caching, 'CacheImpl', None) or caching._CacheImpl
+    impl._locator_classes = [_make_locator()] + [
+        c for c in impl._locator_classes if c.__name__ != 'PackageLocator']
+    files = caching.IndexDataCacheFile
+    files._load_index = _tolerant(files._load_index, dict)
+    files._load_data = _tolerant(files._load_data, lambda: None)
+    files.save = _tolerant(files.save, lambda: None)
+    _configured = True
 
 
 def import_numba() -> None:

@@ -119,6 +119,9 @@ def _child_main(conn) -> None:
 
     # Ctrl-C reaches the whole process group; the parent decides when this child ends.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # Every kernel loaded now, while the child waits for its first request.
+    from threat_planner.core.compiled import ensure_compiled
+    ensure_compiled()
 
     from threat_planner.bag.cdr import serialize_cdr
 

@@ -1,0 +1,169 @@
+"""The compiled kernels made ready: compiled once a machine, loaded once a process.
+
+numba compiles a kernel on its first call with each argument type, and a cached kernel
+is loaded on its first call in each process. :func:`compile_all` runs a workload that
+calls every kernel with every type the planner passes it (the small plans of
+:func:`_workload`; a test checks that the bundled scenarios then compile nothing) and
+writes a manifest of those signatures beside the cache. :func:`ensure_compiled` loads
+every signature of the manifest (compiling what the cache lacks), so that a node or a
+worker process pays for it at start-up and not in its first plan; without a manifest
+it runs the workload. ``threat-planner compile``, ``make venv`` and ``setup.py build``
+(colcon, pip) call :func:`compile_all`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import importlib
+import pickle
+import time
+
+import numpy as np
+
+from threat_planner.core import _numba_cache
+
+__all__ = ['KERNEL_MODULES', 'KernelReport', 'compile_all', 'ensure_compiled', 'kernel_stats']
+
+#: Every module that defines compiled kernels.
+KERNEL_MODULES = ('threat_planner.core.cost.pair_integrals', 'threat_planner.core.cost.kernels',
+                  'threat_planner.core.cost.near_kernels',
+                  'threat_planner.core.network.graph_kernels',
+                  'threat_planner.core.optimise.lbfgs',
+                  'threat_planner.core.optimise.limit_kernels',
+                  'threat_planner.core.optimise.lagrangian_kernels',
+                  'threat_planner.core.optimise.limits',
+                  'threat_planner.core.optimise.chain_kernels')
+_MANIFEST = 'signatures.pickle'
+
+
+@dataclass(frozen=True)
+class KernelReport:
+    """What making the kernels ready took.
+
+    Attributes:
+        seconds: Wall time [s].
+        compiled: Kernel signatures compiled (not found in the cache).
+        loaded: Kernel signatures loaded from the cache.
+        cache: The cache folder.
+    """
+
+    seconds: float
+    compiled: int
+    loaded: int
+    cache: str
+
+    def line(self) -> str:
+        """One line for a log: compiled or loaded, how many, how long."""
+        if self.compiled:
+            return (f'compiled {self.compiled} kernel signatures in {self.seconds:.1f} s '
+                    f'(once per install of these sources; cache {self.cache})')
+        return f'loaded {self.loaded} compiled kernels in {self.seconds:.2f} s'
+
+
+def _dispatchers() -> dict[str, object]:
+    """Return qualified name -> numba dispatcher of every kernel (modules imported)."""
+    try:
+        from numba.core.dispatcher import Dispatcher
+    except ImportError:  # pragma: no cover - numba is in install_requires
+        return {}
+    out = {}
+    for name in KERNEL_MODULES:
+        module = importlib.import_module(name)
+        for attr, value in vars(module).items():
+            if isinstance(value, Dispatcher) and value.__module__ == name:
+                out[f'{name}.{attr}'] = value
+    return out
+
+
+def kernel_stats() -> tuple[int, int]:
+    """Return (loaded from the cache, compiled) signatures over every kernel so far."""
+    hits = misses = 0
+    for d in _dispatchers().values():
+        hits += sum(d.stats.cache_hits.values())
+        misses += sum(d.stats.cache_misses.values())
+    return hits, misses
+
+
+def _workload() -> None:
+    """Plan the small problems that reach every kernel with every argument type."""
+    from threat_planner.core.inputs.config import PlannerConfig
+    from threat_planner.core.inputs.settings import NO_LIMITS
+    from threat_planner.core.planner import _tiny_plan, plan
+    from threat_planner.core.world.airspace import Airspace, make_zone
+    from threat_planner.core.world.terrain import Terrain
+    from threat_planner.core.world.threats import Box, ThreatField
+    for module in ('threat_planner.core.cost.kernels', 'threat_planner.core.network.graph_kernels',
+                   'threat_planner.core.optimise.limits'):
+        importlib.import_module(module).warm_up()
+    _tiny_plan()
+    rng = np.random.default_rng(1)
+    box = Box.from_corners([0.0, 0.0, 0.0], [100.0, 100.0, 100.0])
+    s, t = np.array([2.0, 3.0, 10.0]), np.array([97.0, 96.0, 90.0])
+    small = ThreatField.from_arrays(rng.uniform(15.0, 85.0, (20, 3)), rng.uniform(1e3, 1e4, 20))
+    crowded = ThreatField.from_arrays(rng.uniform(5.0, 95.0, (300, 3)), np.full(300, 50.0))
+    for threats in (small, crowded):
+        for extra in ({}, NO_LIMITS):
+            first = plan(threats, s, t, box, PlannerConfig(**extra))
+        moved = ThreatField.from_arrays(threats.positions + 1e-3, threats.intensities)
+        plan(moved, s, t, box, PlannerConfig(**extra), warm_start=first)
+    for method in ('paper', 'improved'):
+        plan(small, s, t, box, PlannerConfig(method=method))
+    heights = 10.0 + 5.0 * np.sin(np.linspace(0.0, 3.0, 11))[None, :] * np.ones((11, 1))
+    terrain = Terrain.from_arrays([0.0, 0.0], 10.0, heights, clearance=2.0, masking=True)
+    air = Airspace((make_zone('sphere', 'no_fly_zones[0]', center=[50.0, 50.0, 50.0],
+                              radius=8.0),), terrain)
+    plan(small, np.array([2.0, 3.0, 40.0]), t, box, PlannerConfig(), airspace=air)
+
+
+def _manifest_path():
+    return _numba_cache.cache_dir() / _MANIFEST
+
+
+def _write_manifest() -> None:
+    sigs = {name: list(d.signatures) for name, d in _dispatchers().items() if d.signatures}
+    try:
+        path = _manifest_path()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix('.tmp')
+        tmp.write_bytes(pickle.dumps(sigs))
+        tmp.replace(path)
+    except OSError:
+        pass  # an unwritable cache: the next process runs the workload again
+
+
+def _read_manifest() -> dict | None:
+    try:
+        sigs = pickle.loads(_manifest_path().read_bytes())
+    except Exception:  # noqa: BLE001 - missing or damaged: run the workload instead
+        return None
+    return sigs if isinstance(sigs, dict) else None
+
+
+def _report(t0: float, before: tuple[int, int]) -> KernelReport:
+    hits, misses = kernel_stats()
+    return KernelReport(time.perf_counter() - t0, misses - before[1], hits - before[0],
+                        str(_numba_cache.cache_dir()))
+
+
+def compile_all() -> KernelReport:
+    """Compile (or load) every kernel through the workload and write the manifest."""
+    t0, before = time.perf_counter(), kernel_stats()
+    _workload()
+    _write_manifest()
+    return _report(t0, before)
+
+
+def ensure_compiled() -> KernelReport:
+    """Load every kernel signature of the manifest (compile any the cache lacks)."""
+    t0, before = time.perf_counter(), kernel_stats()
+    sigs = _read_manifest()
+    dispatchers = _dispatchers()
+    if sigs is None or not set(sigs) <= set(dispatchers):
+        return compile_all()
+    for name, signatures in sigs.items():
+        for sig in signatures:
+            try:
+                dispatchers[name].compile(sig)
+            except Exception:  # noqa: BLE001 - a signature that no longer fits: it
+                return compile_all()  # compiles on first use; rebuild the manifest
+    return _report(t0, before)
