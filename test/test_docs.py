@@ -83,8 +83,8 @@ def expected_parameter_row(s):
 
 
 def _qos(profile):
-    return (f'{profile.reliability.name.lower()}, '
-            f'{profile.durability.name.lower().replace("_", " ")}, depth {profile.depth}')
+    words = [profile.reliability.name, profile.durability.name]
+    return ', '.join(w.lower().replace('_', ' ') for w in words) + f', depth {profile.depth}'
 
 
 def _message_type(name):
