@@ -115,7 +115,8 @@ def run_batch(study_path: str | Path, out: str | Path, workers: int | None = Non
         else:
             from threat_planner.batch.local import run_local
             finished = run_local(groups, n)
-            backend = f'local ({min(n, max(len(groups), 1))} workers)'
+            used = min(n, len(groups))
+            backend = f'local ({used} worker{"" if used == 1 else "s"})' if used else 'local'
         count = 0
         if progress is not None and todo:
             progress(0, len(todo))

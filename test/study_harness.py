@@ -1,0 +1,35 @@
+"""Small studies for the batch tests: scenario copies, a study file, and table comparisons."""
+
+from pathlib import Path
+import shutil
+import subprocess
+import sys
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / 'test' / 'data'
+#: Columns that measure the run rather than the result.
+TIMING = ('total_ms',)
+
+
+def write_study(folder: Path, scenarios=('weak20_0', 'uniform20_0'), **fields) -> Path:
+    """Copy the scenarios into ``folder/fields`` and write ``folder/study.yaml``."""
+    (folder / 'fields').mkdir(parents=True, exist_ok=True)
+    for name in scenarios:
+        shutil.copy(DATA / f'{name}.yaml', folder / 'fields' / f'{name}.yaml')
+    study = {'scenarios': ['fields/*.yaml'], **fields}
+    path = folder / 'study.yaml'
+    path.write_text(yaml.safe_dump(study))
+    return path
+
+
+def rows(table) -> list[dict]:
+    """The table's rows without the timing columns, for comparing two runs."""
+    return table.drop_columns(list(TIMING)).to_pylist()
+
+
+def cli(*args, cwd=None, timeout=300):
+    """Run ``threat-planner`` as a user does; the completed process."""
+    return subprocess.run([sys.executable, '-m', 'threat_planner.cli', *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout, cwd=cwd)
