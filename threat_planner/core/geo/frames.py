@@ -168,13 +168,6 @@ def enu_box(datum: Datum, lo_geo: object, hi_geo: object, name: str = 'bounds') 
             raise InputError(f'{name}.max: {what} {_plain(hi_g[k])} ({high}) must exceed '
                              f'{name}.min {_plain(lo_g[k])} ({low})')
     lo, hi = datum.to_enu(np.stack([lo_g, hi_g]))
-    for k, (axis, word) in enumerate((('east', 'longitude'), ('north', 'latitude'),
-                                      ('up', 'height'))):
-        if hi[k] <= lo[k]:
-            raise InputError(
-                f'{name}.max: its {axis} coordinate {hi[k]:.3f} m does not exceed '
-                f'{name}.min\'s {lo[k]:.3f} m in the ENU frame of the datum (check the '
-                f'{word}s and their order: min is south-west-floor)')
     span = np.maximum(hi[:2], 0.0) - np.minimum(lo[:2], 0.0)
     k = int(np.argmax(span))
     if span[k] > MAX_SPAN_M:
@@ -184,4 +177,11 @@ def enu_box(datum: Datum, lo_geo: object, hi_geo: object, name: str = 'bounds') 
             f'would put its level floor {flattening_m(datum, span[k]):.0f} m above the '
             f'ellipsoid height at the far side ({flattening_m(datum, MAX_SPAN_M):.0f} m at '
             f'{MAX_SPAN_M / 1e3:g} km); use a datum nearer the box or a smaller box')
+    for k, (axis, word) in enumerate((('east', 'longitude'), ('north', 'latitude'),
+                                      ('up', 'height'))):
+        if hi[k] <= lo[k]:
+            raise InputError(
+                f'{name}.max: its {axis} coordinate {hi[k]:.3f} m does not exceed '
+                f'{name}.min\'s {lo[k]:.3f} m in the ENU frame of the datum (check the '
+                f'{word}s and their order: min is south-west-floor)')
     return Box.from_corners(lo, hi)

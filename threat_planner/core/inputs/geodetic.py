@@ -150,4 +150,3 @@ def dem_terrain(terrain: dict, datum: Optional[Datum], box: Box, base: Optional[
     out = {'origin': origin.tolist(), 'resolution': res, 'heights': heights}
     out.update({k: terrain[k] for k in ('clearance', 'masking') if k in terrain})
     return out
-
