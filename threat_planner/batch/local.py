@@ -10,6 +10,7 @@ from __future__ import annotations
 from concurrent.futures import as_completed, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 import multiprocessing
+import os
 from typing import Iterator
 
 from threat_planner.batch import worker
@@ -33,7 +34,7 @@ def run_local(chunks: list[list[Task]], workers: int) -> Iterator[list[dict]]:
     ctx = multiprocessing.get_context('forkserver')
     ctx.set_forkserver_preload(['threat_planner.batch.worker'])
     pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(chunks))), mp_context=ctx,
-                               initializer=worker.initialise, initargs=(True,))
+                               initializer=worker.initialise, initargs=(os.getpid(),))
     futures = [pool.submit(worker.run_chunk, c) for c in chunks]
     try:
         for f in as_completed(futures):

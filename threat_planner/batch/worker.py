@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 import os
+import select
 import signal
 import threading
 import time
@@ -25,12 +26,14 @@ __all__ = ['initialise', 'run_chunk', 'run_task']
 _STATE = {'ready': False}
 
 
-def initialise(watch_parent: bool = False) -> None:
+def initialise(parent: int | None = None) -> None:
     """Set a worker up once: one compute thread, Ctrl-C left to the parent.
 
     Each worker is one of several processes sharing the cores: numba's and BLAS's own
-    threads would only compete with the other workers. ``watch_parent`` makes the process
-    leave when its parent dies (a killed ``batch`` run leaves no workers behind).
+    threads would only compete with the other workers. With ``parent`` (the pid of the
+    ``batch`` run) the worker leaves as soon as that process ends, however it ended: a
+    killed run leaves no workers behind (they are children of multiprocessing's fork
+    server, which outlives the run as long as they do).
     """
     if _STATE['ready']:
         return
@@ -40,16 +43,29 @@ def initialise(watch_parent: bool = False) -> None:
         numba.set_num_threads(1)
     except (ImportError, ValueError):  # pragma: no cover - numba is required
         pass
-    if watch_parent:
+    if parent is not None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        parent = os.getppid()
-        threading.Thread(target=_watch, args=(parent,), daemon=True,
+        threading.Thread(target=_leave_with, args=(parent,), daemon=True,
                          name='batch parent watch').start()
 
 
-def _watch(parent: int) -> None:
-    while os.getppid() == parent:
-        time.sleep(0.5)
+def _leave_with(parent: int) -> None:
+    """Return never; end this process once ``parent`` has ended."""
+    try:
+        fd = os.pidfd_open(parent)
+    except (AttributeError, OSError):   # no pidfd (old kernel, not Linux): poll
+        fd = None
+    if fd is not None:
+        select.select([fd], [], [])     # readable once the process has ended
+    else:
+        while True:
+            try:
+                os.kill(parent, 0)
+            except ProcessLookupError:
+                break
+            except PermissionError:
+                pass
+            time.sleep(0.5)
     os._exit(1)
 
 

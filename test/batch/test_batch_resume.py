@@ -1,0 +1,125 @@
+"""Results survive: a run killed with SIGKILL, run again, gives the uninterrupted table."""
+
+import os
+from pathlib import Path
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pyarrow.parquet as pq
+import pytest
+from study_harness import cli, ROOT, rows, write_study
+
+from threat_planner.batch.runner import run_batch
+from threat_planner.batch.store import Store
+from threat_planner.batch.study import load_study
+from threat_planner.batch.tasks import task_list
+from threat_planner.errors import InputError
+
+# 2 scenarios x 6 w x 2 settings = 24 plans, each scored on 8 pictures: a few seconds of
+# work in chunks of about 3 plans.
+STUDY = dict(w=[0.2, 0.3, 0.4, 0.5, 0.6, 0.7], settings={'max_climb_deg': [25, 30]},
+             uncertainty={'samples': 8, 'position_sigma_m': 5.0, 'seed': 2})
+
+
+@pytest.fixture(scope='module')
+def study(tmp_path_factory):
+    return write_study(tmp_path_factory.mktemp('study'), **STUDY)
+
+
+@pytest.fixture(scope='module')
+def whole(study, tmp_path_factory):
+    """The uninterrupted run's table."""
+    out = tmp_path_factory.mktemp('whole')
+    run_batch(study, out, workers=2)
+    return pq.read_table(out / 'results.parquet')
+
+
+def _descendants(pid: int) -> set[int]:
+    parents = {}
+    for entry in os.listdir('/proc'):
+        if entry.isdigit():
+            try:
+                stat = Path(f'/proc/{entry}/stat').read_text()
+            except OSError:
+                continue
+            parents[int(entry)] = int(stat.rsplit(')', 1)[1].split()[1])
+    out, frontier = set(), {pid}
+    while frontier:
+        frontier = {p for p, pp in parents.items() if pp in frontier} - out
+        out |= frontier
+    return out
+
+
+def test_killed_mid_run_then_resumed_equals_the_uninterrupted_table(study, whole, tmp_path):
+    out = tmp_path / 'out'
+    run = subprocess.Popen([sys.executable, '-m', 'threat_planner.cli', 'batch', str(study),
+                            '--out', str(out), '--workers', '2'], cwd=ROOT,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while not list((out / 'parts').glob('*.parquet')) and time.monotonic() < deadline:
+        assert run.poll() is None, run.stderr.read().decode()
+        time.sleep(0.005)
+    workers = _descendants(run.pid)
+    run.send_signal(signal.SIGKILL)            # kill -9: no handler, no clean-up
+    run.wait()
+    run.stdout.close()
+    run.stderr.close()
+    assert not (out / 'results.parquet').exists(), 'the run ended before it was killed'
+    assert workers, 'no worker process was running'
+    # The orphaned workers notice and leave.
+    deadline = time.monotonic() + 10
+    while any(Path(f'/proc/{p}').exists() for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(Path(f'/proc/{p}').exists() for p in workers)
+    again = cli('batch', study, '--out', out, '--workers', '2', cwd=ROOT)
+    assert again.returncode == 0, again.stderr
+    ran, before = map(int, re.search(r'(\d+) run now \((\d+) done before\)',
+                                     again.stdout).groups())
+    assert ran + before == 24 and ran > 0 and before > 0
+    assert rows(pq.read_table(out / 'results.parquet')) == rows(whole)
+    assert not list((out / 'parts').iterdir())     # merged and tidied
+
+
+def test_a_rerun_runs_nothing_and_keeps_the_table(study, whole, tmp_path):
+    shutil.copytree(Path(study).parent, tmp_path / 's')
+    path = tmp_path / 's' / 'study.yaml'
+    run_batch(path, tmp_path / 'out', workers=2)
+    again = run_batch(path, tmp_path / 'out', workers=2)
+    assert again.ran == 0 and again.tasks == 24
+    assert rows(pq.read_table(tmp_path / 'out' / 'results.parquet')) == rows(whole)
+
+
+def test_merge_keeps_each_row_once_whatever_the_sources_hold(study, whole, tmp_path):
+    """A crash between writing the table and removing its parts leaves rows twice."""
+    tasks = task_list(load_study(study))
+    store = Store(tmp_path, load_study(study))
+    done = whole.to_pylist()
+    half = [r for r in done if r['task'] in {t.key for t in tasks[:10]}]
+    store.commit(half)
+    store.commit(half)                              # the same rows in two parts
+    store.merge(tasks)
+    store.commit(half[:5])                          # and again beside the merged table
+    (tmp_path / 'parts' / '.cut.parquet.1.tmp').write_bytes(b'PAR1 cut off')
+    store.close()
+    store = Store(tmp_path, load_study(study))      # removes the cut-off write
+    assert not list((tmp_path / 'parts').glob('.*.tmp'))
+    assert store.done() == {t.key for t in tasks[:10]}
+    store.commit([r for r in done if r not in half])
+    table = store.merge(tasks)
+    store.close()
+    assert rows(table) == rows(whole)
+
+
+def test_a_folder_of_another_study_or_in_use_is_refused(study, tmp_path):
+    store = Store(tmp_path, load_study(study))
+    with pytest.raises(InputError, match='another batch run is writing to'):
+        Store(tmp_path, load_study(study))
+    store.close()
+    other = Path(study).parent / 'other.yaml'
+    other.write_text(Path(study).read_text().replace('- 0.7', '- 0.8'))
+    with pytest.raises(InputError, match=r'holds the results of another study \(its w'):
+        Store(tmp_path, load_study(other))
