@@ -42,6 +42,12 @@ HEIGHT_TOLERANCE_M = 1e-4
 _METRES = ('', 'm', 'metre', 'meter', 'metres', 'meters')
 
 
+def _apply(affine, x: NDArray, y: NDArray) -> tuple[NDArray, NDArray]:
+    """An affine map (a GeoTIFF's pixel <-> CRS transform) applied to arrays of points."""
+    a, b, c, d, e, f = tuple(affine)[:6]
+    return a * x + b * y + c, d * x + e * y + f
+
+
 class _Dem:
     """An open GeoTIFF's first band, sampled bilinearly at latitude-longitude points."""
 
@@ -62,8 +68,8 @@ class _Dem:
         """Fractional column and row of points (pixel (0, 0) spans 0..1 each way)."""
         xs, ys = self._warp.transform('EPSG:4326', self.ds.crs, lon.ravel().tolist(),
                                       lat.ravel().tolist())
-        col, row = self._inverse * (np.asarray(xs), np.asarray(ys))
-        return np.asarray(col).reshape(lat.shape), np.asarray(row).reshape(lat.shape)
+        col, row = _apply(self._inverse, np.asarray(xs), np.asarray(ys))
+        return col.reshape(lat.shape), row.reshape(lat.shape)
 
     def covers(self, col: NDArray, row: NDArray) -> NDArray:
         """Whether each pixel position lies within the raster."""
@@ -106,7 +112,8 @@ class _Dem:
         """The DEM's pixel spacing in ENU metres at (lat, lon): the smaller of its two."""
         col, row = self.pixels(np.array([lat]), np.array([lon]))
         c0, r0 = float(np.floor(col[0])) + 0.5, float(np.floor(row[0])) + 0.5
-        xs, ys = self.ds.transform * (np.array([c0, c0 + 1, c0]), np.array([r0, r0, r0 + 1]))
+        xs, ys = _apply(self.ds.transform, np.array([c0, c0 + 1, c0]),
+                        np.array([r0, r0, r0 + 1]))
         lons, lats = self._warp.transform(self.ds.crs, 'EPSG:4326', list(xs), list(ys))
         p = datum.to_enu(np.column_stack([lats, lons, np.zeros(3)]))
         return float(min(np.linalg.norm(p[1] - p[0]), np.linalg.norm(p[2] - p[0])))
