@@ -1,0 +1,27 @@
+"""Where the repository, its scenarios and the bench results are."""
+
+from __future__ import annotations
+
+from pathlib import Path
+import sys
+from typing import Sequence
+
+ROOT = Path(__file__).resolve().parents[2]
+#: Results of the suites (committed).
+RESULTS = ROOT / 'bench' / 'results'
+#: The bundled scenarios and ``reference.json``.
+DATA = ROOT / 'test' / 'data'
+#: The shared scenarios (``scale*.yaml``, ``reference_box.json``), where present.
+SHARED = Path('/work/shared/scenarios')
+
+
+def command(suite: str, argv: Sequence[str] = ()) -> str:
+    """Return the command line that runs ``suite`` with ``argv``, as results quote it."""
+    return ' '.join(['python -m bench', suite, *argv])
+
+
+def suite_process(suite: str, *args: str) -> list[str]:
+    """Return the command running ``python -m bench suite args`` from any folder."""
+    boot = (f'import sys; sys.path.insert(0, {str(ROOT)!r}); '
+            'from bench.__main__ import main; sys.exit(main())')
+    return [sys.executable, '-c', boot, suite, *args]
