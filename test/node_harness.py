@@ -61,7 +61,16 @@ def domain_id(offset: int, span: int = 40) -> int:
     """
     if offset + span - 1 > MAX_DOMAIN_ID:
         raise ValueError(f'domain offset {offset} + span {span} passes {MAX_DOMAIN_ID}')
-    return offset + os.getpid() % span
+    domain = offset + os.getpid() % span
+    # Under pytest-xdist each worker takes the domains of its own residue, so files that
+    # run at the same time in two workers never share one (within a worker they take turns).
+    workers = int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1'))
+    worker = os.environ.get('PYTEST_XDIST_WORKER', '')
+    if workers > 1 and worker.startswith('gw'):
+        domain += (int(worker[2:]) - domain) % workers
+        if domain > MAX_DOMAIN_ID:
+            domain -= workers
+    return domain
 
 
 def set_discovery_env(env) -> None:

@@ -22,7 +22,8 @@ import numpy as np
 
 from threat_planner.core import _numba_cache
 
-__all__ = ['KERNEL_MODULES', 'KernelReport', 'compile_all', 'ensure_compiled', 'kernel_stats']
+__all__ = ['KERNEL_MODULES', 'KernelReport', 'compile_all', 'ensure_compiled', 'kernel_stats',
+           'kernels_cached']
 
 #: Every module that defines compiled kernels.
 KERNEL_MODULES = ('threat_planner.core.cost.pair_integrals', 'threat_planner.core.cost.kernels',
@@ -143,6 +144,11 @@ def _report(t0: float, before: tuple[int, int]) -> KernelReport:
     hits, misses = kernel_stats()
     return KernelReport(time.perf_counter() - t0, misses - before[1], hits - before[0],
                         str(_numba_cache.cache_dir()))
+
+
+def kernels_cached() -> bool:
+    """Whether this machine's cache has the manifest (every kernel was compiled once)."""
+    return _read_manifest() is not None
 
 
 def compile_all() -> KernelReport:

@@ -62,7 +62,7 @@ from sensor_msgs.msg import Image, NavSatFix, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
 from threat_planner.bag import McapRecorder
-from threat_planner.core.compiled import ensure_compiled
+from threat_planner.core.compiled import ensure_compiled, kernels_cached
 from threat_planner.errors import InputError, RecordingError
 from threat_planner.ros.conversions import plan_info_msg
 from threat_planner.ros.inputs import accept, input_stamp, InputState
@@ -129,9 +129,15 @@ class ThreatPlannerNode(Node):
         self._closed = False
         self._subs: dict = {}
         self._guard = self.create_guard_condition(self._publish_outcomes)
-        self._load_kernels()
+        # A cold cache compiles here, once, before the children start (they then load);
+        # a warm one loads in the children and here at the same time.
+        cached = kernels_cached()
+        if not cached:
+            self._load_kernels()
         # reliability (issue 14): plans run in a child process, the executor stays free.
         self._worker = ProcessPlanWorker(self._hand_over, name='threat_planner_worker')
+        if cached:
+            self._load_kernels()
         if self._state.settings.record:
             try:
                 self._recorder = self._open_recorder(self._state.settings.record)
