@@ -12,7 +12,7 @@ $(STAMP): setup.py setup.cfg package.xml
 	@echo "[2/4] upgrading pip"
 	$(BIN)/pip install --progress-bar on --upgrade pip
 	@echo "[3/4] installing threat_planner with ROS 2 wheels (about a minute)"
-	$(BIN)/pip install --progress-bar on -e '.[ros,record,test,bench,cluster]'
+	$(BIN)/pip install --progress-bar on -e '.[ros,record,test,bench,cluster,geo]'
 	@echo "[4/4] compiling the kernels into the cache (once per install, 30-70 s)"
 	$(BIN)/threat-planner compile
 	touch $(STAMP)

@@ -74,7 +74,11 @@ setup(
         ],
         'record': ['mcap', 'mcap-ros2-support'],
         'test': ['pytest', 'hypothesis', 'flake8', 'pydocstyle', 'rosbags', 'colcon-core',
-                 'colcon-ros', 'colcon-python-setup-py'],
+                 'colcon-ros', 'colcon-python-setup-py',
+                 # readers of the exports (issue 26): ArduPilot / QGC files, MAVSDK, GeoJSON
+                 'pymavlink', 'mavsdk', 'geojson'],
+        # WGS84 scenarios, DEM terrain and exports (issue 26; loaded only when used)
+        'geo': ['pymap3d', 'rasterio', 'pyproj'],
         'bench': ['ompl'],
         # threat-planner batch --ray (the tests start a local Ray cluster too)
         'cluster': ['ray'],
