@@ -27,15 +27,21 @@ def test_robust_j_is_the_mean_exact_j_over_its_pictures(name, w):
     u = Uncertainty(position_sigma_m=5.0, intensity_sigma=0.2)
     cfg = PlannerConfig(w=w)
     result = plan_robust(sc.threats, sc.start, sc.goal, sc.box, cfg, 6, u, seed=[3, 1])
-    pictures = sample_pictures(sc.threats, 6, u, [3, 1])
+    pictures = sample_pictures(sc.threats, 6, u, [3, 1], antithetic=True)
     assert result.cost.J == pytest.approx(_mean_exact_j(result.path, pictures, w), rel=1e-12)
     merged = merged_field(pictures)
     assert len(merged) == 6 * len(sc.threats)
     on_merged = path_cost(result.path, merged.positions, merged.intensities, w)
     assert result.cost.J == pytest.approx(on_merged.J, rel=1e-12)
-    # It is the planner's own plan of that field, nothing else.
+    assert result.feasible
+    # No worse than either start it had: the planner's plan of the merged field and the
+    # nominal plan's path.
     direct = plan(merged, sc.start, sc.goal, sc.box, cfg)
-    np.testing.assert_array_equal(direct.path, result.path)
+    nominal = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
+    assert result.cost.J <= direct.cost.J * (1 + 1e-12)
+    assert result.cost.J <= _mean_exact_j(nominal.path, pictures, w) * (1 + 1e-12)
+    assert set(result.timings_ms) == {'merged_plan_ms', 'nominal_plan_ms', 'refine_ms',
+                                      'total_ms'}
 
 
 @settings(max_examples=40, deadline=None)
@@ -70,6 +76,15 @@ def test_pictures_spread_as_asked_and_picture_i_never_depends_on_the_count():
     for a, b in ((few[3], many[3]), (later[0], many[3]), (later[1], many[4])):
         np.testing.assert_array_equal(a.positions, b.positions)
         np.testing.assert_array_equal(a.intensities, b.intensities)
+    pairs = sample_pictures(sc.threats, 300, u, 11, antithetic=True)
+    np.testing.assert_array_equal(pairs[0].positions, many[0].positions)
+    for a, b in zip(pairs[0::2], pairs[1::2]):
+        np.testing.assert_allclose(a.positions + b.positions, 2 * sc.threats.positions,
+                                   rtol=1e-14, atol=1e-12)
+        np.testing.assert_allclose(a.intensities * b.intensities, sc.threats.intensities ** 2,
+                                   rtol=1e-12)
+    moved = np.stack([p.positions - sc.threats.positions for p in pairs[1::2]])
+    assert moved.std() == pytest.approx(5.0, rel=0.05)     # each picture spreads alike
     other = sample_pictures(sc.threats, 1, u, 12)[0]
     assert not np.array_equal(other.positions, many[0].positions)
     still = sample_pictures(sc.threats, 3, Uncertainty(), 11)
