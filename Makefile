@@ -34,7 +34,7 @@ test: venv
 	$(BIN)/python -m pytest -q
 
 bench: venv
-	$(BIN)/python bench/run_benchmark.py
+	$(BIN)/python -m bench benchmark
 
 clean:
 	rm -rf $(VENV) build install log demo_out .pytest_cache

@@ -49,7 +49,7 @@ class DevelopAndCompile(develop):
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test', 'bench']),
+    packages=find_packages(exclude=['test', 'bench', 'bench.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> None:
     lines = ['# Random fields, before and after', '',
              f'Written by `python -m bench random_fields`: before = `{rev["before"]}`, after = '
              f'`{rev["after"]}`, one plan per cell on a shared 2-core machine (read the J '
-             'ratios; times are indicative). Fields: see the script\'s docstring.', '']
+             'ratios; times are indicative). Fields: see the suite\'s docstring.', '']
     table = ['', f'Cases whose J moved by more than {NOTABLE:.1%} (or that are infeasible):',
              '', '| case | before J | after J | after/before | before ms | after ms | '
              'feasible after |', '|---|---:|---:|---:|---:|---:|---|']

@@ -1,4 +1,4 @@
-"""bench/run_perturbation.py: the move is what it says, and the report counts what moved."""
+"""bench/suites/perturbation.py: the move is what it says, and the report counts what moved."""
 
 import importlib
 from pathlib import Path
@@ -8,10 +8,10 @@ import numpy as np
 
 from threat_planner.core.world.threats import ThreatField
 
-BENCH = Path(__file__).resolve().parents[2] / 'bench'
-if str(BENCH) not in sys.path:
-    sys.path.insert(0, str(BENCH))
-rp = importlib.import_module('run_perturbation')
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+rp = importlib.import_module('bench.suites.perturbation')
 
 
 def test_every_threat_moves_by_the_size_and_keeps_its_intensity():

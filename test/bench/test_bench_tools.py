@@ -1,4 +1,4 @@
-"""Fast tests of the benchmark's own pieces (bench/bench_tools.py)."""
+"""Fast tests of the benchmark's own pieces (bench/toolkit/)."""
 
 import importlib
 import json
@@ -12,11 +12,13 @@ from threat_planner.core.cost.closed_form import path_cost
 from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.world.threats import Box, ThreatField
 
-BENCH = Path(__file__).resolve().parents[2] / 'bench'
+ROOT = Path(__file__).resolve().parents[2]
 DATA = Path(__file__).resolve().parents[1] / 'data'
-if str(BENCH) not in sys.path:
-    sys.path.insert(0, str(BENCH))
-bt = importlib.import_module('bench_tools')
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+bt = importlib.import_module('bench.toolkit.ompl_planners')
+bg = importlib.import_module('bench.toolkit.grid')
+bc = importlib.import_module('bench.toolkit.cases')
 
 needs_ompl = pytest.mark.skipif(not bt.ompl_available(), reason='ompl cannot import')
 
@@ -34,14 +36,14 @@ def test_load_reference_parses_keys(tmp_path):
     path = tmp_path / 'reference.json'
     path.write_text(json.dumps({'a_b@0.2': {'J': 1.5, 'seconds': 2.0},
                                 'x@0.8': {'J': 3.0}}))
-    ref = bt.load_reference(path)
+    ref = bc.load_reference(path)
     assert ref[('a_b', 0.2)] == {'J': 1.5, 'seconds': 2.0}
     assert ref[('x', 0.8)]['J'] == 3.0
     assert np.isnan(ref[('x', 0.8)]['seconds'])
 
 
 def test_load_reference_bundled():
-    ref = bt.load_reference(DATA / 'reference.json')
+    ref = bc.load_reference(DATA / 'reference.json')
     assert ('uniform20_0', 0.8) in ref
     assert len(ref) == 3 * len({name for name, _ in ref})
     assert all(v['J'] > 0 for v in ref.values())
@@ -51,7 +53,7 @@ def test_load_reference_rejects_bad_key(tmp_path):
     path = tmp_path / 'reference.json'
     path.write_text(json.dumps({'nokey': {'J': 1.0}}))
     with pytest.raises(ValueError):
-        bt.load_reference(path)
+        bc.load_reference(path)
 
 
 @pytest.mark.parametrize('w', [0.2, 0.8])
@@ -72,9 +74,9 @@ def test_segment_cost_equals_path_cost(scenario, w):
 
 def test_grid_floor_path_and_cost(scenario):
     th = scenario.threats
-    graph = bt.build_grid(th, scenario.start, scenario.goal, scenario.box, n=7)
+    graph = bg.build_grid(th, scenario.start, scenario.goal, scenario.box, n=7)
     for w in (0.2, 0.8):
-        pts, j, graph_j, _ = bt.grid_floor(graph, th, w)
+        pts, j, graph_j, _ = bg.grid_floor(graph, th, w)
         np.testing.assert_array_equal(pts[0], scenario.start)
         np.testing.assert_array_equal(pts[-1], scenario.goal)
         assert j == path_cost(pts, th.positions, th.intensities, w).J
@@ -86,8 +88,8 @@ def test_grid_floor_start_on_a_node():
     th = ThreatField.from_arrays([[50.0, 50.0, 50.0]], [1e5])
     box = Box.from_corners([0, 0, 0], [100, 100, 100])
     start, goal = np.array([0.0, 0.0, 50.0]), np.array([100.0, 100.0, 50.0])
-    graph = bt.build_grid(th, start, goal, box, n=5)
-    pts, j, graph_j, _ = bt.grid_floor(graph, th, 0.5)
+    graph = bg.build_grid(th, start, goal, box, n=5)
+    pts, j, graph_j, _ = bg.grid_floor(graph, th, 0.5)
     assert np.all(np.linalg.norm(np.diff(pts, axis=0), axis=1) > 0)
     np.testing.assert_array_equal(pts[[0, -1]], [start, goal])
     assert _rel(graph_j, j) < 1e-9
@@ -95,13 +97,13 @@ def test_grid_floor_start_on_a_node():
 
 def test_scale_problem_density():
     for n in (20, 160):
-        th, start, goal, box = bt.scale_problem(n, seed=1)
+        th, start, goal, box = bc.scale_problem(n, seed=1)
         assert len(th) == n
         side = box.hi[0] - box.lo[0]
         assert side == pytest.approx(100.0 * (n / 20) ** (1 / 3))
         assert box.contains(start) and box.contains(goal)
-    a = bt.scale_problem(50, seed=2)[0].positions
-    np.testing.assert_array_equal(a, bt.scale_problem(50, seed=2)[0].positions)
+    a = bc.scale_problem(50, seed=2)[0].positions
+    np.testing.assert_array_equal(a, bc.scale_problem(50, seed=2)[0].positions)
 
 
 @needs_ompl
@@ -142,7 +144,7 @@ def _case(name, w, n, js, ms=10.0, limits_ok=True, limited=110.0):
     for k, m in methods.items():
         if '@' in k:
             m.update(rel_diff=0.0, motion_calls=100, budget_s=1.0, capped=False)
-    br = importlib.import_module('benchmark_report')
+    br = importlib.import_module('bench.toolkit.benchmark_report')
     if br.ON in methods:
         methods[br.ON].update(limits_ok=limits_ok, ratio_limited=methods[br.ON]['J'] / limited,
                               worst_violation='' if limits_ok else 'max_climb_deg 31 vs 30')
@@ -154,8 +156,8 @@ def _case(name, w, n, js, ms=10.0, limits_ok=True, limited=110.0):
 
 
 def test_targets_are_against_the_in_box_and_limited_yardsticks():
-    br = importlib.import_module('benchmark_report')
-    rb = importlib.import_module('run_benchmark')
+    br = importlib.import_module('bench.toolkit.benchmark_report')
+    rb = importlib.import_module('bench.suites.benchmark')
     assert rb.OURS[br.OFF]['max_climb_deg'] == 90 and rb.OURS[br.OFF]['min_turn_radius_m'] == 0
     cases = [_case('a', 0.2, 20, {br.OFF: 100.1, br.ON: 111.0, 'RRT*@10x': 120.0}, ms=12.0),
              _case('b', 0.8, 20, {br.OFF: 103.0, br.ON: 110.0, 'RRT*@10x': 101.0}, ms=50.0,
@@ -184,7 +186,7 @@ def test_targets_are_against_the_in_box_and_limited_yardsticks():
 
 def test_random_fields_are_reproducible_and_the_summary_lists_the_movers():
     """The same 45 fields every run; a J moved past 0.2 % or an infeasible plan is listed."""
-    rf = importlib.import_module('run_random_fields')
+    rf = importlib.import_module('bench.suites.random_fields')
     first = [(name, th.positions.copy(), s, t) for name, th, s, t, _, _ in rf.fields()]
     again = list(rf.fields())
     assert len(first) == len(rf.SIZES) * len(rf.SEEDS) * len(rf.WS) == 45
@@ -207,9 +209,9 @@ def test_moved_threats_stay_within_the_fraction_of_the_diagonal():
     field, intensities untouched."""
     sc = load_scenario(DATA / 'uniform20_0.yaml')
     diag = sc.box.diagonal
-    moved = bt.moved_threats(sc.threats, diag)
+    moved = bc.moved_threats(sc.threats, diag)
     shift = np.linalg.norm(moved.positions - sc.threats.positions, axis=1)
     assert shift.max() <= 0.005 * diag and shift.min() > 0
     np.testing.assert_array_equal(moved.intensities, sc.threats.intensities)
-    np.testing.assert_array_equal(bt.moved_threats(sc.threats, diag).positions,
+    np.testing.assert_array_equal(bc.moved_threats(sc.threats, diag).positions,
                                   moved.positions)

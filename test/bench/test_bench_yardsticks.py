@@ -1,4 +1,4 @@
-"""The benchmark's yardstick table (bench/yardsticks.py): sources, checks, refusals."""
+"""The yardstick table (bench/toolkit/yardstick_table.py): sources, checks, refusals."""
 
 import importlib
 import json
@@ -11,10 +11,10 @@ import pytest
 from threat_planner.core.cost.closed_form import path_cost
 from threat_planner.core.inputs.scenario import load_scenario
 
-BENCH = Path(__file__).resolve().parents[2] / 'bench'
-if str(BENCH) not in sys.path:
-    sys.path.insert(0, str(BENCH))
-yd = importlib.import_module('yardsticks')
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+yd = importlib.import_module('bench.toolkit.yardstick_table')
 DATA = Path(__file__).resolve().parents[1] / 'data'
 W = 0.5
 
@@ -92,8 +92,8 @@ def test_committed_yardsticks_load_and_agree_with_reference_box():
 
 
 def test_score_case_checks_the_limits_row_independently(sc):
-    rb = importlib.import_module('run_benchmark')
-    br = importlib.import_module('benchmark_report')
+    rb = importlib.import_module('bench.suites.benchmark')
+    br = importlib.import_module('bench.toolkit.benchmark_report')
     line = np.array([sc.start, sc.goal])
     j = path_cost(line, sc.threats.positions, sc.threats.intensities, W).J
     up = 20.0 if sc.start[2] + 20.0 <= sc.box.hi[2] else -20.0

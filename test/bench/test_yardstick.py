@@ -12,12 +12,12 @@ import pytest
 from threat_planner.core.cost.closed_form import path_cost
 from threat_planner.core.world.threats import Box, ThreatField
 
-BENCH = Path(__file__).resolve().parents[2] / 'bench'
-if str(BENCH) not in sys.path:
-    sys.path.insert(0, str(BENCH))
-bt = importlib.import_module('bench_tools')
-fl = importlib.import_module('flight_limits')
-ys = importlib.import_module('yardstick')
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+bt = importlib.import_module('bench.toolkit.grid')
+fl = importlib.import_module('bench.toolkit.flight_limits')
+ys = importlib.import_module('bench.toolkit.yardstick')
 
 W = 0.5
 

@@ -146,13 +146,13 @@ def test_crowded_fields_always_replan_cold():
 
 
 def _bench_tools():
-    """The bench's helpers (bench/bench_tools.py), for its exact warm-replan move."""
+    """The bench's cases (bench/toolkit/cases.py), for its exact warm-replan move."""
     import importlib
     import sys
-    bench = str(Path(__file__).resolve().parents[2] / 'bench')
-    if bench not in sys.path:
-        sys.path.insert(0, bench)
-    return importlib.import_module('bench_tools')
+    root = str(Path(__file__).resolve().parents[2])
+    if root not in sys.path:
+        sys.path.insert(0, root)
+    return importlib.import_module('bench.toolkit.cases')
 
 
 def test_a_warm_start_that_breaks_a_limit_refines_at_full_resolution_no_worse_than_cold():

@@ -1,7 +1,7 @@
 """CI-sized reliability tests of the planner node: a short flood, kill -9 and SIGINT.
 
-The same experiments as ``bench/flood.py`` and ``bench/faults.py`` (whose functions these
-tests call), made small enough for CI:
+The same experiments as ``bench/suites/flood.py`` and ``bench/suites/faults.py`` (whose
+functions these tests call), made small enough for CI:
 
 * a 5 s flood at 100 Hz with 20 threats: the node answers parameter gets throughout, the
   last plan answers the last picture, every picture it received was planned or coalesced,
@@ -22,9 +22,8 @@ import pytest
 
 from node_harness import domain_id, REPO, RosClient
 
-sys.path.insert(0, str(REPO / 'bench'))
-import faults  # noqa: E402
-import flood  # noqa: E402
+sys.path.insert(0, str(REPO))
+from bench.suites import faults, flood  # noqa: E402
 
 from threat_planner.core.inputs.scenario import load_scenario  # noqa: E402
 
