@@ -277,56 +277,56 @@ def sigint_during_long_plan(client: RosClient, work: Path, scenario: Scenario,
     return result
 
 
+def _of(runs: list[dict], test) -> str:
+    """Return ``k/n``: how many of the runs pass `test`, a result key or a function of one."""
+    hits = sum(bool(test(x) if callable(test) else x[test]) for x in runs)
+    return f'{hits}/{len(runs)}'
+
+
 def markdown(results: dict) -> str:
     """Return the Markdown summary of the experiments."""
     lines = ['### Faults', '']
     if 'kill_while_planning' in results:
         runs = results['kill_while_planning']
         r = runs[0]
+        held = _of(runs, lambda x: x['killed_bag_holds_input'] and not x['killed_bag_error'])
         lines += [
             f"**kill -9 while planning** ({r['threats']} threats, {r['method']}, killed "
             f"{r['kill_after_s']:.1f} s after the picture, {len(runs)} runs): "
-            f"{sum(x['ok'] for x in runs)}/{len(runs)} passed; killed bag read tolerantly "
-            f"without error and holding the picture in "
-            f"{sum(x['killed_bag_holds_input'] and not x['killed_bag_error'] for x in runs)}"
-            f"/{len(runs)}; restarted node planned the latched picture (input #1) in "
-            f"{sum(x['restart_plans_latched_input'] for x in runs)}/{len(runs)} and the "
-            f"next picture in {sum(x['restart_plans_next_input'] for x in runs)}/{len(runs)};"
-            f" restart -> latched plan median "
+            f"{_of(runs, 'ok')} passed; killed bag read tolerantly without error and holding "
+            f"the picture in {held}; restarted node planned the latched picture (input #1) "
+            f"in {_of(runs, 'restart_plans_latched_input')} and the next picture in "
+            f"{_of(runs, 'restart_plans_next_input')}; restart -> latched plan median "
             f"{stats([x['restart_to_latched_plan_s'] for x in runs])['median']:.1f} s.", '']
     if 'kill_while_recording' in results:
         runs = results['kill_while_recording']
         r = runs[0]
         lost = stats([x['inputs_after_last_in_bag'] for x in runs])
         window = stats([x['unrecorded_window_s'] for x in runs])
+        strict = ', '.join(sorted(set(x['killed_bag_strict_read'] for x in runs)))
         lines += [
             f"**kill -9 while recording** ({r['threats']} threats at {r['rate_hz']:g} Hz, "
-            f"{len(runs)} runs): {sum(x['ok'] for x in runs)}/{len(runs)} passed; tolerant "
-            f"read without error in {sum(x['killed_bag_error'] is None for x in runs)}"
-            f"/{len(runs)} (strict read: "
-            f"{', '.join(sorted(set(x['killed_bag_strict_read'] for x in runs)))}); inputs "
-            f"in order without duplicates in "
-            f"{sum(x['in_order_no_duplicates'] for x in runs)}/{len(runs)}, exactly the "
-            f"first pictures sent in {sum(x['bag_is_prefix_of_sent'] for x in runs)}"
-            f"/{len(runs)} (pictures never received by the node: "
+            f"{len(runs)} runs): {_of(runs, 'ok')} passed; tolerant read without error in "
+            f"{_of(runs, lambda x: x['killed_bag_error'] is None)} (strict read: {strict}); "
+            f"inputs in order without duplicates in {_of(runs, 'in_order_no_duplicates')}, "
+            f"exactly the first pictures sent in {_of(runs, 'bag_is_prefix_of_sent')} "
+            "(pictures never received by the node: "
             f"{sum(x['not_received_gaps'] for x in runs)}); every picture older than flush "
-            f"interval + 1 s present in "
-            f"{sum(x['bag_holds_all_older_than_flush'] for x in runs)}/{len(runs)}; "
+            f"interval + 1 s present in {_of(runs, 'bag_holds_all_older_than_flush')}; "
             f"pictures sent after the last one in the bag: median {lost['median']:.0f}, "
             f"max {lost['max']:.0f} (the last {window['median']:.2f} s, max "
-            f"{window['max']:.2f} s before the kill); restarted "
-            f"node planned the latched last picture in "
-            f"{sum(x['restart_plans_latched_last_input'] for x in runs)}/{len(runs)}.", '']
+            f"{window['max']:.2f} s before the kill); restarted node planned the latched "
+            f"last picture in {_of(runs, 'restart_plans_latched_last_input')}.", '']
     if 'sigint_during_long_plan' in results:
         runs = results['sigint_during_long_plan']
         exit_s = stats([x['exit_s'] for x in runs])
         lines += [
             f"**SIGINT during a long plan** ({runs[0]['threats']} threats, {len(runs)} runs):"
-            f" {sum(x['ok'] for x in runs)}/{len(runs)} passed; exit after SIGINT median "
+            f" {_of(runs, 'ok')} passed; exit after SIGINT median "
             f"{1e3 * exit_s['median']:.0f} ms, max {1e3 * exit_s['max']:.0f} ms (limit "
             f"{1e3 * SIGINT_LIMIT_S:.0f} ms), exit codes "
             f"{sorted(set(x['exit_code'] for x in runs))}; recording finished (strict read) "
-            f"in {sum(x['recording_finished'] for x in runs)}/{len(runs)}.", '']
+            f"in {_of(runs, 'recording_finished')}.", '']
     return '\n'.join(lines)
 
 
