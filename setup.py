@@ -73,8 +73,8 @@ setup(
             'ros-jazzy-lifecycle-msgs',
         ],
         'record': ['mcap', 'mcap-ros2-support'],
-        'test': ['pytest', 'hypothesis', 'flake8', 'pydocstyle', 'rosbags', 'colcon-core',
-                 'colcon-ros', 'colcon-python-setup-py',
+        'test': ['pytest', 'pytest-xdist', 'hypothesis', 'flake8', 'pydocstyle', 'rosbags',
+                 'colcon-core', 'colcon-ros', 'colcon-python-setup-py',
                  # readers of the exports (issue 26): ArduPilot / QGC files, MAVSDK, GeoJSON
                  'pymavlink', 'mavsdk', 'geojson'],
         # WGS84 scenarios, DEM terrain and exports (issue 26; loaded only when used)
