@@ -124,13 +124,28 @@ class _Dem:
         return f'lat {s:.6f}..{n:.6f}, lon {w:.6f}..{e:.6f}'
 
 
-def _missing_side(inside: NDArray) -> str | None:
-    """Which side of the grid (rows along north) has points outside the DEM, or None."""
-    for side, edge in (('west', inside[:, 0]), ('east', inside[:, -1]),
-                       ('south', inside[0, :]), ('north', inside[-1, :])):
-        if not edge.all():
-            return side
-    return None if inside.all() else 'interior'
+def _missing_side(inside: NDArray) -> tuple[str, tuple[int, int]] | None:
+    """The side of the grid (rows along north) most outside the DEM and its first point
+    outside (row, column), or None if covered.
+
+    A box poking out to the north leaves its whole north edge and the north ends of its
+    west and east edges uncovered: the side named is the one with the largest share out.
+    """
+    if inside.all():
+        return None
+    ny, nx = inside.shape
+    edges = {'west': (np.arange(ny), np.zeros(ny, int)),
+             'east': (np.arange(ny), np.full(ny, nx - 1)),
+             'south': (np.zeros(nx, int), np.arange(nx)),
+             'north': (np.full(nx, ny - 1), np.arange(nx))}
+    share = {side: float(np.mean(~inside[idx])) for side, idx in edges.items()}
+    side = max(share, key=share.get)
+    if share[side] == 0:
+        k = np.unravel_index(int(np.argmax(~inside)), inside.shape)
+        return 'interior', (int(k[0]), int(k[1]))
+    rows, cols = edges[side]
+    i = int(np.argmax(~inside[rows, cols]))
+    return side, (int(rows[i]), int(cols[i]))
 
 
 def dem_grid(path: str | Path, datum: Datum, box: Box, resolution: float | None = None,
@@ -178,12 +193,12 @@ def dem_grid(path: str | Path, datum: Datum, box: Box, resolution: float | None 
             lat, lon, h = geo[..., 0], geo[..., 1], geo[..., 2]
             col, row = dem.pixels(lat, lon)
             inside = dem.covers(col, row)
-            side = _missing_side(inside)
-            if side is not None:
+            missing = _missing_side(inside)
+            if missing is not None:
+                side, k = missing
                 edge = {'west': f'x = {box.lo[0]:g} m', 'east': f'x = {box.hi[0]:g} m',
                         'south': f'y = {box.lo[1]:g} m', 'north': f'y = {box.hi[1]:g} m',
                         'interior': 'inside'}[side]
-                k = np.unravel_index(int(np.argmax(~inside)), inside.shape)
                 raise InputError(
                     f'terrain.dem: {name} does not cover the box\'s {side} side ({edge}; '
                     f'first uncovered point lat {lat[k]:.6f}, lon {lon[k]:.6f}); the DEM '
