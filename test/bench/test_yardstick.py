@@ -1,4 +1,4 @@
-"""Fast tests of the benchmark's in-box yardsticks (bench/yardstick.py, bench/flight_limits.py)."""
+"""Fast tests of the in-box yardsticks (bench/toolkit/yardstick.py, flight_limits.py)."""
 
 import importlib
 import math
