@@ -114,11 +114,25 @@ def test_merge_keeps_each_row_once_whatever_the_sources_hold(study, whole, tmp_p
     assert rows(table) == rows(whole)
 
 
-def test_a_folder_of_another_study_or_in_use_is_refused(study, tmp_path):
-    store = Store(tmp_path, load_study(study))
+HOLD = ('import sys\n'
+        'from threat_planner.batch.store import Store\n'
+        'from threat_planner.batch.study import load_study\n'
+        'store = Store(sys.argv[1], load_study(sys.argv[2]))\n'
+        'print("held", flush=True)\n'
+        'sys.stdin.read()\n')
+
+
+def test_a_folder_in_use_or_of_another_study_is_refused(study, tmp_path):
+    other_run = subprocess.Popen([sys.executable, '-c', HOLD, str(tmp_path), str(study)],
+                                 cwd=ROOT, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                 text=True)
+    assert other_run.stdout.readline().strip() == 'held'
     with pytest.raises(InputError, match='another batch run is writing to'):
         Store(tmp_path, load_study(study))
-    store.close()
+    other_run.stdin.close()                          # that run ends: the folder is free
+    assert other_run.wait(timeout=60) == 0
+    other_run.stdout.close()
+    Store(tmp_path, load_study(study)).close()
     other = Path(study).parent / 'other.yaml'
     other.write_text(Path(study).read_text().replace('- 0.7', '- 0.8'))
     with pytest.raises(InputError, match=r'holds the results of another study \(its w'):

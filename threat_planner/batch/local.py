@@ -1,8 +1,10 @@
 """The default backend: worker processes on this machine that stay alive across chunks.
 
-The processes fork from a server that has imported the planner once (multiprocessing's
-``forkserver``: no fork of a parent that may run threads, and no import per worker); each
-loads the compiled kernels at its first plan and keeps them for every later chunk.
+The workers fork from this process where that is safe (no other thread runs here and
+numba's compute threads never started: the command line), so they start at once with the
+planner imported; elsewhere (a caller that planned or runs threads) they fork from
+multiprocessing's fork server, which imports the planner once. Each loads the compiled
+kernels at its first plan and keeps them for every later chunk.
 """
 
 from __future__ import annotations
@@ -11,31 +13,51 @@ from concurrent.futures import as_completed, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 import multiprocessing
 import os
+import threading
 from typing import Iterator
 
 from threat_planner.batch import worker
 from threat_planner.batch.tasks import Task
 from threat_planner.errors import PlanningError
 
-__all__ = ['run_local']
+__all__ = ['run_local', 'start_method']
+
+
+def start_method() -> str:
+    """Return 'fork' where forking this process is safe, else 'forkserver'."""
+    try:
+        from numba.np.ufunc import parallel
+        launched = bool(getattr(parallel, '_is_initialized', True))
+    except ImportError:  # pragma: no cover - numba is required
+        launched = False
+    # A fork copies locks held by other threads, and GNU OpenMP's pool (numba's threading
+    # layer here) does not survive one.
+    safe = threading.active_count() == 1 and not launched
+    return 'fork' if safe and 'fork' in multiprocessing.get_all_start_methods() \
+        else 'forkserver'
 
 
 def run_local(chunks: list[list[Task]], workers: int) -> Iterator[list[dict]]:
-    """Run the chunks on ``workers`` processes; yield each chunk's rows as it finishes.
+    """Start ``workers`` processes on the chunks now; iterate over each chunk's rows.
 
     Raises
     ------
     PlanningError
-        If a worker process died (the rows of finished chunks stay committed).
+        While iterating, if a worker process died (finished chunks stay committed).
 
     """
     if not chunks:
-        return
-    ctx = multiprocessing.get_context('forkserver')
-    ctx.set_forkserver_preload(['threat_planner.batch.worker'])
+        return iter(())
+    ctx = multiprocessing.get_context(start_method())
+    if ctx.get_start_method() == 'forkserver':
+        ctx.set_forkserver_preload(['threat_planner.batch.worker'])
     pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(chunks))), mp_context=ctx,
                                initializer=worker.initialise, initargs=(os.getpid(),))
     futures = [pool.submit(worker.run_chunk, c) for c in chunks]
+    return _finished(pool, futures)
+
+
+def _finished(pool: ProcessPoolExecutor, futures: list) -> Iterator[list[dict]]:
     try:
         for f in as_completed(futures):
             yield f.result()

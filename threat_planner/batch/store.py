@@ -70,10 +70,11 @@ class Store:
             self.parts.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise InputError(f'--out: cannot make {self.out} ({exc.strerror})') from None
-        # Held until this process ends (a kill releases it): one run writes at a time.
+        # Held until this process ends (a kill releases it): one run writes at a time. A
+        # POSIX record lock belongs to this process alone, not to forked workers.
         self._lock = open(self.out / LOCK, 'w')
         try:
-            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            fcntl.lockf(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             self._lock.close()
             raise InputError(f'--out: another batch run is writing to {self.out}') from None
