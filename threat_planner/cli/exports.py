@@ -1,5 +1,7 @@
-"""The exports of ``threat-planner plan``: ``--qgc``, ``--waypoints``, ``--geojson``,
-``--max-waypoints`` and the ``path_geodetic`` of ``--json``.
+"""The exports of ``threat-planner plan``.
+
+``--qgc``, ``--waypoints``, ``--geojson``, ``--max-waypoints`` and the ``path_geodetic`` of
+``--json``.
 
 Heavy work is done only when asked: a plan without these options imports nothing here
 but argparse's definitions.

@@ -50,7 +50,7 @@ def _ccw(xy: NDArray) -> NDArray:
 
 
 def footprint(zone: Zone, datum: Datum) -> Footprint:
-    """The outline of one zone (ENU, in the frame of `datum`) in latitude and longitude."""
+    """Return the outline of one zone (ENU, in the frame of `datum`) in latitude and longitude."""
     if isinstance(zone, Sphere):
         c, r = zone.center, zone.radius
         z0, z1, ring, radius = c[2] - r, c[2] + r, None, r

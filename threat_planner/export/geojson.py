@@ -37,7 +37,7 @@ def _feature(geometry: dict, **properties: object) -> dict:
 def feature_collection(path: NDArray, datum: Datum, threats: Optional[ThreatField] = None,
                        zones: Iterable[Zone] = (), name: str = 'plan',
                        properties: Optional[dict] = None) -> dict:
-    """The GeoJSON document of a plan.
+    """Return the GeoJSON document of a plan.
 
     Args:
         path: Path points in the ENU frame of `datum` (n, 3) [m].

@@ -33,7 +33,7 @@ FIRMWARE_GENERIC, VEHICLE_GENERIC = 0, 0
 
 def qgc_plan(path: NDArray, datum: Datum, zones: Iterable[Zone] = (),
              cruise_speed_m_s: float = 10.0, hover_speed_m_s: float = 5.0) -> dict:
-    """The plan file's document.
+    """Return the plan file's document.
 
     Args:
         path: Path points in the ENU frame of `datum` (n, 3) [m]; the first is home.

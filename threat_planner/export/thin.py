@@ -53,7 +53,7 @@ class Thinned:
 
 
 def _deviation(path: NDArray, a: int, b: int) -> tuple[int, float]:
-    """The point strictly between a and b farthest from the chord a->b, and its distance."""
+    """Return the point strictly between a and b farthest from the chord a->b, and its distance."""
     if b - a < 2:
         return -1, -1.0
     p, q = path[a], path[b]
@@ -66,7 +66,7 @@ def _deviation(path: NDArray, a: int, b: int) -> tuple[int, float]:
 
 
 def _no_worse(path: NDArray, limits: FlightLimits, floor: float) -> FlightLimits:
-    """The limits the thinned path must meet: the plan's own where it breaks one."""
+    """Return the limits the thinned path must meet: the plan's own where it breaks one."""
     c = check_limits(path, limits, floor)
     return FlightLimits(max(limits.max_climb_deg, c.climb_deg) if limits.climb_on else 90.0,
                         max(limits.max_dive_deg, c.dive_deg) if limits.dive_on else 90.0,
@@ -87,7 +87,7 @@ class _Rules:
                         else self.airspace.segment_ok(path[:-1], path[1:]))
 
     def bad_spans(self, keep: list[int]) -> set[int]:
-        """Indices (into keep) of spans to split."""
+        """Return the indices (into keep) of the spans to split."""
         pts = self.path[keep]
         lim, bad = self.limits, set()
         if self.airspace is not None:

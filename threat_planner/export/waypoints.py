@@ -30,7 +30,7 @@ def _line(i: int, frame: int, lat: float, lon: float, alt: float) -> str:
 
 
 def waypoints_text(path: NDArray, datum: Datum) -> str:
-    """The file's text: home (the path's first point), then every path point."""
+    """Return the file's text: home (the path's first point), then every path point."""
     geo = datum.to_geodetic(np.asarray(path, float))
     home = geo[0]
     lines = [HEADER, _line(0, MAV_FRAME_GLOBAL, *home)]

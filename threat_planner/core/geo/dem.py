@@ -43,7 +43,7 @@ _METRES = ('', 'm', 'metre', 'meter', 'metres', 'meters')
 
 
 def _apply(affine, x: NDArray, y: NDArray) -> tuple[NDArray, NDArray]:
-    """An affine map (a GeoTIFF's pixel <-> CRS transform) applied to arrays of points."""
+    """Apply an affine map (a GeoTIFF's pixel <-> CRS transform) applied to arrays of points."""
     a, b, c, d, e, f = tuple(affine)[:6]
     return a * x + b * y + c, d * x + e * y + f
 
@@ -109,7 +109,7 @@ class _Dem:
                 + v * ((1 - u) * values[j + 1, i] + u * values[j + 1, i + 1]))
 
     def spacing_m(self, datum: Datum, lat: float, lon: float) -> float:
-        """The DEM's pixel spacing in ENU metres at (lat, lon): the smaller of its two."""
+        """Return the DEM's pixel spacing in ENU metres at (lat, lon): the smaller of its two."""
         col, row = self.pixels(np.array([lat]), np.array([lon]))
         c0, r0 = float(np.floor(col[0])) + 0.5, float(np.floor(row[0])) + 0.5
         xs, ys = _apply(self.ds.transform, np.array([c0, c0 + 1, c0]),
@@ -119,14 +119,15 @@ class _Dem:
         return float(min(np.linalg.norm(p[1] - p[0]), np.linalg.norm(p[2] - p[0])))
 
     def extent(self) -> str:
-        """The raster's bounds in latitude and longitude, for error messages."""
+        """Return the raster's bounds in latitude and longitude, for error messages."""
         w, s, e, n = self._warp.transform_bounds(self.ds.crs, 'EPSG:4326', *self.ds.bounds)
         return f'lat {s:.6f}..{n:.6f}, lon {w:.6f}..{e:.6f}'
 
 
 def _missing_side(inside: NDArray) -> tuple[str, tuple[int, int]] | None:
-    """The side of the grid (rows along north) most outside the DEM and its first point
-    outside (row, column), or None if covered.
+    """Find the side of the grid (rows along north) most outside the DEM.
+
+    Returns the side and its first point outside (row, column), or None if covered.
 
     A box poking out to the north leaves its whole north edge and the north ends of its
     west and east edges uncovered: the side named is the one with the largest share out.

@@ -140,7 +140,7 @@ def flattening_m(datum: Datum, distance_m: float) -> float:
 
 
 def enu_box(datum: Datum, lo_geo: object, hi_geo: object, name: str = 'bounds') -> Box:
-    """The ENU box spanned by two geodetic corners (south-west-floor, north-east-ceiling).
+    """Return the ENU box spanned by two geodetic corners (south-west-floor, north-east-ceiling).
 
     Each corner is converted as it is; the box runs from the first's east, north and up
     to the second's. The other corners of the latitude-longitude rectangle are not used

@@ -34,7 +34,7 @@ DEM_KEYS = ('dem', 'clearance', 'masking', 'resolution', 'height_offset')
 
 
 def frame_of(data: dict) -> tuple[Optional[Datum], bool]:
-    """The scenario's datum (or None) and whether its coordinates are geodetic."""
+    """Return the scenario's datum (or None) and whether its coordinates are geodetic."""
     coordinates = data.get('coordinates', 'local')
     if coordinates not in COORDINATES:
         raise InputError(f'coordinates: expected local or geodetic, got {coordinates!r}')
@@ -85,7 +85,7 @@ def _zone(datum: Datum, z: object, name: str) -> object:
 
 
 def to_local(data: dict, positions: object, datum: Datum, threats_name: str) -> dict:
-    """The geodetic keys of a scenario in the ENU frame of `datum`.
+    """Return the geodetic keys of a scenario in the ENU frame of `datum`.
 
     Args:
         data: The scenario mapping (``coordinates: geodetic``).
@@ -120,7 +120,7 @@ def to_local(data: dict, positions: object, datum: Datum, threats_name: str) -> 
 
 def dem_terrain(terrain: dict, datum: Optional[Datum], box: Box, base: Optional[Path]
                 ) -> dict:
-    """A ``terrain: {dem: FILE.tif, ...}`` mapping as the grid mapping the airspace reads.
+    """Turn a ``terrain: {dem: FILE.tif, ...}`` mapping into the grid the airspace reads.
 
     Raises:
         InputError: naming ``terrain`` and the key: no datum, an unknown key or one of the

@@ -22,7 +22,7 @@ __all__ = ['navsatfix_from_geodetic', 'point_from_navsatfix']
 
 
 def point_from_navsatfix(msg: NavSatFix, datum: Optional[Datum], name: str) -> NDArray:
-    """The ENU point (3,) [m] of a fix.
+    """Return the ENU point (3,) [m] of a fix.
 
     Args:
         msg: The fix.
@@ -51,7 +51,7 @@ def point_from_navsatfix(msg: NavSatFix, datum: Optional[Datum], name: str) -> N
 
 def navsatfix_from_geodetic(lat: float, lon: float, h: float, stamp=None,
                             frame_id: str = 'gnss') -> NavSatFix:
-    """A fix (status FIX, GPS) at latitude, longitude [deg] and height [m]."""
+    """Return a fix (status FIX, GPS) at latitude, longitude [deg] and height [m]."""
     msg = NavSatFix(latitude=float(lat), longitude=float(lon), altitude=float(h))
     msg.status.status = NavSatStatus.STATUS_FIX
     msg.status.service = NavSatStatus.SERVICE_GPS
