@@ -31,11 +31,20 @@ def install(tmp_path_factory):
     colcon = str(COLCON) if COLCON.exists() else shutil.which('colcon')
     base = tmp_path_factory.mktemp('colcon')
     cmd = [colcon, '--log-base', str(base / 'log'), 'build', '--base-paths', str(REPO),
-           '--build-base', str(base / 'build'), '--install-base', str(base / 'install')]
+           '--build-base', str(base / 'build'), '--install-base', str(base / 'install'),
+           '--event-handlers', 'console_direct+']
     done = subprocess.run(cmd, cwd=str(base), capture_output=True, text=True, timeout=300,
                           stdin=subprocess.DEVNULL)
     assert done.returncode == 0, done.stdout + done.stderr
+    (base / 'build_output.txt').write_text(done.stdout + done.stderr)
     return base / 'install'
+
+
+def test_the_build_compiles_the_kernels_into_the_shared_cache(install):
+    """setup.py's build step ran the kernels' workload (a warm cache: it only loads)."""
+    output = (install.parent / 'build_output.txt').read_text()
+    assert 'threat_planner: loaded' in output or 'threat_planner: compiled' in output, \
+        output[-3000:]
 
 
 def test_install_layout(install):
