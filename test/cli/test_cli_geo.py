@@ -1,5 +1,6 @@
-"""The command line with WGS84: the README's example command, one-line errors, and a plain
-plan that loads none of the geodesy, raster or MAVLink packages."""
+"""The command line with WGS84: path_geodetic, one-line errors, and a plain plan that loads
+none of the geodesy, raster or MAVLink packages (the README's example command: test/export).
+"""
 
 import json
 from pathlib import Path
@@ -13,35 +14,6 @@ from threat_planner.cli.main import main
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / 'examples' / 'geo'
 HEAVY = ('pymap3d', 'rasterio', 'pyproj', 'mavsdk', 'pymavlink', 'geojson')
-
-
-def readme_command():
-    """The README's one command for the example (its exports written to examples/geo)."""
-    text = (REPO / 'README.md').read_text()
-    line = next(ln for ln in text.splitlines() if 'examples/geo/valley.yaml' in ln
-                and ln.lstrip().startswith('threat-planner plan'))
-    return line.split()[1:]
-
-
-def test_the_readme_command_writes_the_three_exports(tmp_path, capsys):
-    args = readme_command()
-    for flag in ('--qgc', '--waypoints', '--geojson'):
-        assert flag in args, f'README command lacks {flag}'
-        i = args.index(flag) + 1
-        assert Path(args[i]).parent == Path('examples/geo')
-        args[i] = str(tmp_path / Path(args[i]).name)    # leave the committed files alone
-    args[args.index('examples/geo/valley.yaml')] = str(EXAMPLE / 'valley.yaml')
-    assert main(args) == 0
-    out = capsys.readouterr().out
-    for name in ('valley.plan', 'valley.waypoints', 'valley.geojson'):
-        assert (tmp_path / name).exists() and name in out
-        # the committed exports come from this command: same kind and size of content
-        committed, fresh = (EXAMPLE / name).read_text(), (tmp_path / name).read_text()
-        assert committed.splitlines()[0] == fresh.splitlines()[0]
-    plan = json.loads((tmp_path / 'valley.plan').read_text())
-    committed = json.loads((EXAMPLE / 'valley.plan').read_text())
-    assert len(plan['mission']['items']) == len(committed['mission']['items'])
-    assert plan['geoFence'] == committed['geoFence']      # zones do not depend on the plan
 
 
 def test_local_scenario_with_a_datum_gets_path_geodetic(tmp_path):

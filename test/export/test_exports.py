@@ -1,10 +1,11 @@
 """Exports read back by the readers autopilots and maps use, not by parsers of our own.
 
-The example scenario (examples/geo: geodetic, DEM terrain, all four zone kinds) is planned
-once from the command line; its ``.waypoints`` is read by pymavlink's MAVWPLoader and by
-MAVSDK, its ``.plan`` by MAVSDK's import_qgroundcontrol_mission (MAVSDK's native library,
-fed one heartbeat from a pymavlink-encoded autopilot: no network), its GeoJSON by the
-geojson package; each matches ``path_geodetic`` of ``--json`` point for point.
+The README's command plans the example (examples/geo: geodetic, DEM terrain, all four zone
+kinds) once and exports 16 waypoints; its ``.waypoints`` is read by pymavlink's
+MAVWPLoader and by MAVSDK, its ``.plan`` by MAVSDK's import_qgroundcontrol_mission
+(MAVSDK's native library, fed one heartbeat from a pymavlink-encoded autopilot: no
+network), its GeoJSON by the geojson package; each matches the exported points of
+``--json`` point for point, and those are ``path_geodetic``'s rows that were kept.
 """
 
 import json
@@ -21,16 +22,9 @@ REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / 'examples' / 'geo' / 'valley.yaml'
 
 
-@pytest.fixture(scope='module')
-def exported(tmp_path_factory):
-    out = tmp_path_factory.mktemp('exports')
-    files = {k: out / f'valley.{k}' for k in ('json', 'plan', 'waypoints', 'geojson')}
-    code = main(['plan', str(EXAMPLE), '--json', str(files['json']), '--qgc',
-                 str(files['plan']), '--waypoints', str(files['waypoints']), '--geojson',
-                 str(files['geojson'])])
-    assert code == 0
-    summary = json.loads(files['json'].read_text())
-    return files, summary, np.array(summary['path_geodetic'])
+@pytest.fixture
+def exported(example_run):
+    return example_run.files, example_run.summary, example_run.geo
 
 
 def mavsdk_mission_raw():
@@ -62,8 +56,23 @@ def test_path_geodetic_is_the_path_converted(exported):
     _, summary, geo = exported
     s = load_scenario(EXAMPLE)
     assert summary['datum'] == s.datum.as_list()
-    np.testing.assert_allclose(s.datum.to_enu(geo), summary['path'], atol=1e-6)
-    np.testing.assert_allclose(geo[0], [47.3712, 8.5318, 520.0], atol=1e-9)
+    full = np.array(summary['path_geodetic'])
+    np.testing.assert_allclose(s.datum.to_enu(full), summary['path'], atol=1e-6)
+    np.testing.assert_allclose(full[0], [47.3712, 8.5318, 520.0], atol=1e-9)
+    np.testing.assert_array_equal(geo, full[summary['exported']['kept']])
+    assert len(geo) == 16
+
+
+def test_the_committed_exports_come_from_the_readme_command(example_run):
+    folder = EXAMPLE.parent
+    for name in ('valley.plan', 'valley.waypoints', 'valley.geojson'):
+        assert name in example_run.printed
+        committed, fresh = (folder / name).read_text(), example_run.files[name[7:]].read_text()
+        assert committed.splitlines()[0] == fresh.splitlines()[0]
+    plan = json.loads(example_run.files['plan'].read_text())
+    committed = json.loads((folder / 'valley.plan').read_text())
+    assert len(plan['mission']['items']) == len(committed['mission']['items']) == 16
+    assert plan['geoFence'] == committed['geoFence']      # zones do not depend on the plan
 
 
 def test_waypoints_read_back_with_pymavlink(exported):
@@ -138,7 +147,7 @@ def test_geojson_validates_and_its_line_is_path_geodetic(exported):
     assert len(line) == 1
     np.testing.assert_array_equal(np.array(line[0]['geometry']['coordinates']),
                                   geo[:, [1, 0, 2]])              # GeoJSON is lon, lat, h
-    assert line[0]['properties']['J'] == summary['cost']['final']['J']
+    assert line[0]['properties']['J'] == summary['exported']['cost']['J']   # what is flown
     threats = [f for f in doc['features'] if f['properties']['kind'] == 'threat']
     s = load_scenario(EXAMPLE)
     assert [t['properties']['intensity'] for t in threats] == s.threats.intensities.tolist()

@@ -6,7 +6,6 @@ points exported.
 """
 
 from dataclasses import replace
-import json
 from pathlib import Path
 
 import numpy as np
@@ -93,21 +92,19 @@ def test_a_short_enough_path_is_exported_as_planned():
         thin_path(path, 1, NO_THREATS, BOX, PlannerConfig(), air)
 
 
-def test_cli_thins_the_example_and_reports_the_exported_j(tmp_path, capsys):
-    out = tmp_path / 'plan.json'
-    assert main(['plan', str(EXAMPLE), '--max-waypoints', '12', '--json', str(out)]) == 0
-    text = capsys.readouterr().out
-    summary = json.loads(out.read_text())
+def test_cli_thins_the_example_and_reports_the_exported_j(example_run):
+    summary = example_run.summary
     exported = summary['exported']
     pts = np.array(exported['path'])
-    assert exported['points'] == len(pts) <= 12
+    assert exported['points'] == len(pts) <= 16
     np.testing.assert_array_equal(pts, np.array(summary['path'])[exported['kept']])
     s = load_scenario(EXAMPLE)
     cfg = PlannerConfig()
     # the exact J of the exported points, by the closed form (no masking in this scenario)
     c = path_cost(pts, s.threats.positions, s.threats.intensities, cfg.w)
     assert abs(c.J - exported['cost']['J']) <= 1e-9 * c.J
-    assert f'exported: {len(pts)} of {len(summary["path"])} points, J={c.J:.3f}' in text
+    printed = f'exported: {len(pts)} of {len(summary["path"])} points, J={c.J:.3f}'
+    assert printed in example_run.printed
     assert check_limits(pts, FlightLimits.of(cfg), float(s.box.lo[2])).feasible
     assert s.airspace.violations(pts) == []
     np.testing.assert_allclose(s.datum.to_enu(exported['path_geodetic']), pts, atol=1e-6)
