@@ -29,7 +29,7 @@ def exported(example_run):
 
 def mavsdk_mission_raw():
     """MAVSDK's MissionRaw plugin on a system discovered from one injected heartbeat."""
-    mavsdk = pytest.importorskip('mavsdk')
+    import mavsdk
     from mavsdk.plugins.mission_raw import MissionRaw
     from pymavlink.dialects.v20 import common as mavlink
 
