@@ -273,6 +273,18 @@ class RosClient:
                                        f'({len(self.messages.get(topic, []))} received)')
                 self._cond.wait(min(left, 0.1))
 
+    def wait_future(self, future, timeout: float, what: str):
+        """Wait for an rclpy future and return its result, woken the moment it is done.
+
+        Polling ``future.done`` (as :meth:`wait_until` does) adds up to one poll period to
+        every wait: GetPlan round trips measured that way came out in steps of 20 ms.
+        """
+        done = threading.Event()
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(timeout):
+            raise TimeoutError(f'timed out after {timeout} s waiting for {what}')
+        return future.result()
+
     def wait_until(self, condition: Callable[[], bool], timeout: float, what: str) -> None:
         """Poll `condition` until true."""
         deadline = time.monotonic() + timeout
