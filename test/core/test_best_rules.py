@@ -248,7 +248,7 @@ def test_surface_routes_cost_the_lattice_exactly_up_to_the_pairs_allowed(monkeyp
 
 
 def test_a_candidate_stalled_short_of_a_limit_gets_rounds_again_and_wins(monkeypatch):
-    # A crowded field (bench/run_crowded_fields.py, seed 6) where, measured, the rounds on
+    # A crowded field (python -m bench crowded_fields, seed 6) where, measured, the rounds on
     # the best basin stopped at a 32.6 deg climb against 30 deg and a basin 51 % higher
     # won. Whether they stall there moves with rounding (a 1 nm move of the threats, or
     # another CPU, and they do not), so the stall is made here: the best basin's rounds
@@ -310,7 +310,7 @@ def test_each_rescue_run_starts_at_a_higher_penalty_until_it_meets_the_limits(mo
 
 def test_without_limits_the_best_surface_route_is_refined_when_a_network_route_won(
         monkeypatch):
-    # bench/run_random_fields.py's field n120 seed 2: a lattice route ranked second by its
+    # python -m bench random_fields's field n120 seed 2: a lattice route ranked second by its
     # zigzag J refined 4 % below the winning network route.
     import threat_planner.core.methods.best as best
     from threat_planner.core.planner import plan, PlannerConfig

@@ -189,7 +189,7 @@ SETTINGS: tuple[Setting, ...] = (
     # excess thrust and airspeed envelope allow ~30 deg, and a 30 deg glide is a common
     # autopilot default), turn radius v^2 / (g tan(bank)) = 10 m at 10 m/s and 45 deg bank
     # (a multirotor at speed is comfortable at that radius too). The limited yardstick of
-    # bench/yardstick.py uses the same 30 / 30 / 10 m (PHYSICAL_LIMITS), so the bench
+    # bench/toolkit/yardstick.py uses the same 30 / 30 / 10 m (PHYSICAL_LIMITS), so the bench
     # compares like with like. 90 / 90 / 0 switch them off.
     Setting('max_climb_deg', float, 30.0,
             "Steepest climb of any segment, atan2(dz, horizontal) ('best'; 90 = off)",
@@ -280,7 +280,7 @@ SETTINGS: tuple[Setting, ...] = (
 )
 
 #: The physical limits in force by default (see the settings above), also the limited
-#: yardstick's (bench/yardstick.py).
+#: yardstick's (bench/toolkit/yardstick.py).
 PHYSICAL_LIMITS = {'max_climb_deg': 30.0, 'max_dive_deg': 30.0, 'min_turn_radius_m': 10.0}
 #: The settings that switch the physical limits off.
 NO_LIMITS = {'max_climb_deg': 90.0, 'max_dive_deg': 90.0, 'min_turn_radius_m': 0.0,
