@@ -30,10 +30,11 @@ from bench.toolkit.ompl_planners import (og, ompl_available, ompl_problem, path_
                                          SegmentCost, set_ompl_quiet)
 from bench.toolkit.repo import DATA, RESULTS
 from threat_planner.core.cost.closed_form import path_cost
-from threat_planner.core.cost.masking import masked_segment_costs
+from threat_planner.core.cost.masking import masked_cost, masked_segment_costs
 from threat_planner.core.inputs.config import PlannerConfig
 from threat_planner.core.inputs.scenario import load_scenario
-from threat_planner.core.methods.in_airspace import masked_cost, minimise_in_airspace
+from threat_planner.core.methods.in_airspace import minimise_in_airspace
+from threat_planner.core.optimise.limits import FlightLimits
 from threat_planner.core.optimise.smoothing import check_angles, resample
 from threat_planner.core.planner import plan
 
@@ -69,8 +70,9 @@ def yardstick(sc, w):
     g.threat = np.where(sc.airspace.segment_ok(a, b), g.threat, np.inf)
     pts, _, _, _ = grid_floor(g, sc.threats, w)
     cfg = PlannerConfig()
+    # the physical limits the planner holds by default, so both are held to the same rules
     opt = minimise_in_airspace(resample(pts, cfg.n_points), sc.threats, w, sc.box,
-                               sc.airspace, cfg.max_pitch_deg, cfg.max_turn_deg)
+                               sc.airspace, FlightLimits.of(cfg))
     if sc.airspace.violations(opt):
         opt = pts
     return opt, time.perf_counter() - t0
