@@ -1,11 +1,12 @@
 """The planning method, free of ROS: numpy arrays in, numpy arrays out.
 
 One folder per concern, each importing only the folders above it in this list:
-:mod:`.world` (threats §3.1, box, zones, terrain), :mod:`.inputs` (settings, PlannerConfig,
-scenario files), :mod:`.cost` (J, eq. 15-17), :mod:`.network` (§3.2-3.3), :mod:`.optimise`
-(§3.4 smoothing, L-BFGS, flight limits), :mod:`.methods` (paper, improved, best); then
-:mod:`.planner` (``plan()``) and :mod:`.result`. Nothing here imports rclpy or a message
-package, and no import runs back up this list (``test/test_layers.py`` checks both).
+:mod:`.world` (threats §3.1, box, zones, terrain), :mod:`.geo` (WGS84 datum and ENU
+conversions, DEM terrain), :mod:`.inputs` (settings, PlannerConfig, scenario files),
+:mod:`.cost` (J, eq. 15-17), :mod:`.network` (§3.2-3.3), :mod:`.optimise` (§3.4 smoothing,
+L-BFGS, flight limits), :mod:`.methods` (paper, improved, best); then :mod:`.planner`
+(``plan()``) and :mod:`.result`. Nothing here imports rclpy or a message package, and no
+import runs back up this list (``test/test_layers.py`` checks both).
 """
 
 from threat_planner.core import _numba_cache
