@@ -51,6 +51,9 @@ def test_ray_without_ray_installed_says_how_to_install_it(tmp_path):
 @pytest.mark.parametrize('args,needle', [
     (['--workers', '0'], '--workers: must be an integer >= 1, got 0'),
     (['--ray', ''], "--ray: give a cluster address or 'auto'"),
+    (['--ray', '127.0.0.1:1'], '--ray: no Ray cluster answers at 127.0.0.1:1 (Connection '
+                               'refused)'),
+    (['--ray', 'nonsense'], "--ray: expected host:port or 'auto', got 'nonsense'"),
 ])
 def test_bad_batch_options_exit_2_with_one_line(tmp_path, args, needle):
     study = write_study(tmp_path, scenarios=('weak20_0',))

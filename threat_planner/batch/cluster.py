@@ -11,18 +11,21 @@ threat_planner installed (the tasks import it).
 from __future__ import annotations
 
 import os
+import socket
 from typing import Iterator
 
 from threat_planner.batch import worker
 from threat_planner.batch.tasks import Task
 from threat_planner.errors import InputError
 
-__all__ = ['INSTALL_HINT', 'RETRIES', 'import_ray', 'run_ray']
+__all__ = ['INSTALL_HINT', 'RETRIES', 'connect', 'import_ray', 'run_ray']
 
 INSTALL_HINT = ("--ray: Ray is not installed; install it with pip install "
                 "'threat_planner[cluster]' (or pip install ray)")
 #: Runs of a chunk after its worker died.
 RETRIES = 3
+#: Longest wait for a cluster's address to answer [s].
+CONNECT_S = 5.0
 
 
 def import_ray():
@@ -34,37 +37,68 @@ def import_ray():
     return ray
 
 
-def run_ray(chunks: list[list[Task]], address: str, workers: int | None
-            ) -> Iterator[list[dict]]:
-    """Run the chunks as Ray tasks; yield each chunk's rows as it finishes.
+def connect(address: str, workers: int | None) -> bool:
+    """Join the cluster at ``address`` (or start one for 'auto'); whether one was started.
+
+    A process already connected (``ray.init`` called) keeps its connection.
 
     Parameters
     ----------
-    chunks : list of list of Task
-        The work.
     address : str
-        A cluster address, or 'auto'.
+        A cluster address (``host:port`` or ``ray://host:port``), or 'auto'.
     workers : int, optional
         CPUs of a local cluster started here (None: all of this machine's).
 
+    Raises
+    ------
+    InputError
+        Ray is not installed, or no cluster answers at the address.
+
     """
     ray = import_ray()
-    started = False
-    if not ray.is_initialized():
-        kwargs = {'include_dashboard': False, 'log_to_driver': False}
-        if address == 'auto' and not os.environ.get('RAY_ADDRESS'):
-            kwargs['num_cpus'] = workers
-        else:
-            kwargs['address'] = None if address == 'auto' else address
-        try:
-            ray.init(**kwargs)
-        except (ConnectionError, ValueError, RuntimeError) as exc:
-            raise InputError(f'--ray: cannot reach a Ray cluster at {address} '
-                             f'({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})'
-                             ) from None
-        started = True
+    if ray.is_initialized():
+        return False
+    kwargs = {'log_to_driver': False}
+    target = address if address != 'auto' else os.environ.get('RAY_ADDRESS')
+    if target:
+        _check_reachable(target)
+        kwargs['address'] = None if address == 'auto' else address
+    else:
+        kwargs.update(num_cpus=workers, include_dashboard=False)
+    try:
+        ray.init(**kwargs)
+    except (ConnectionError, ValueError, RuntimeError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise InputError(f'--ray: cannot join a Ray cluster at {target} ({first})') from None
+    return True
+
+
+def run_ray(chunks: list[list[Task]], started: bool) -> Iterator[list[dict]]:
+    """Submit the chunks to the connected cluster now; iterate over each one's rows.
+
+    ``started``: the cluster was started for this run (:func:`connect`), and is shut
+    down after the last chunk.
+    """
+    ray = import_ray()
     remote = ray.remote(num_cpus=1, max_retries=RETRIES)(worker.run_chunk)
     pending = [remote.remote(c) for c in chunks]
+    return _finished(ray, pending, started)
+
+
+def _check_reachable(address: str) -> None:
+    """Refuse at once an address where nothing listens (ray.init would retry for minutes)."""
+    host, _, port = address.removeprefix('ray://').rpartition(':')
+    try:
+        with socket.create_connection((host or '127.0.0.1', int(port)), timeout=CONNECT_S):
+            pass
+    except ValueError:
+        raise InputError(f"--ray: expected host:port or 'auto', got {address!r}") from None
+    except OSError as exc:
+        raise InputError(f'--ray: no Ray cluster answers at {address} '
+                         f'({exc.strerror or type(exc).__name__})') from None
+
+
+def _finished(ray, pending: list, started: bool) -> Iterator[list[dict]]:
     try:
         while pending:
             ready, pending = ray.wait(pending, num_returns=1)

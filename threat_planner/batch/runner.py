@@ -101,7 +101,17 @@ def run_batch(study_path: str | Path, out: str | Path, workers: int | None = Non
             raise InputError("--ray: give a cluster address or 'auto'")
     study = load_study(study_path)
     _import_pyarrow()
-    store = Store(out, study)
+    started = False
+    if ray is not None:
+        from threat_planner.batch.cluster import connect
+        started = connect(ray, workers)
+    try:
+        store = Store(out, study)
+    except InputError:
+        if started:
+            import ray as ray_module
+            ray_module.shutdown()
+        raise
     try:
         tasks = task_list(study)
         done = store.done()
@@ -110,7 +120,7 @@ def run_batch(study_path: str | Path, out: str | Path, workers: int | None = Non
         groups = make_chunks(todo, n)
         if ray is not None:
             from threat_planner.batch.cluster import run_ray
-            finished = run_ray(groups, ray, workers)
+            finished = run_ray(groups, started)
             backend = f'ray ({ray})'
         else:
             from threat_planner.batch.local import run_local
