@@ -84,6 +84,30 @@ def test_killed_mid_run_then_resumed_equals_the_uninterrupted_table(study, whole
     assert not list((out / 'parts').iterdir())     # merged and tidied
 
 
+def test_ctrl_c_stops_the_run_and_the_same_command_resumes_it(tmp_path):
+    study = write_study(tmp_path / 's', w=[round(0.1 + 0.07 * i, 2) for i in range(12)],
+                        settings={'max_climb_deg': [25, 30]})
+    out = tmp_path / 'out'
+    run = subprocess.Popen([sys.executable, '-m', 'threat_planner.cli', 'batch', str(study),
+                            '--out', str(out), '--workers', '2'], cwd=ROOT,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    while not list((out / 'parts').glob('*.parquet')) and run.poll() is None:
+        time.sleep(0.005)
+    run.send_signal(signal.SIGINT)
+    stdout, stderr = run.communicate(timeout=120)
+    assert run.returncode == 130, stderr
+    assert stderr.replace('\r', '\n').strip().splitlines()[-1] == 'threat-planner: interrupted'
+    assert 'Traceback' not in stderr
+    store = Store(out, load_study(study))
+    done = len(store.done())
+    store.close()
+    assert 0 < done < 48, 'the interrupted run went on to the end'
+    again = cli('batch', study, '--out', out, '--workers', '2', cwd=ROOT)
+    assert again.returncode == 0, again.stderr
+    assert f'{48 - done} run now ({done} done before)' in again.stdout
+    assert pq.read_table(out / 'results.parquet').num_rows == 48
+
+
 def test_a_rerun_runs_nothing_and_keeps_the_table(study, whole, tmp_path):
     shutil.copytree(Path(study).parent, tmp_path / 's')
     path = tmp_path / 's' / 'study.yaml'

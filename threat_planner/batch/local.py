@@ -47,7 +47,7 @@ def run_local(chunks: list[list[Task]], workers: int) -> Iterator[list[dict]]:
 
     """
     if not chunks:
-        return iter(())
+        return _finished(None, [])
     ctx = multiprocessing.get_context(start_method())
     if ctx.get_start_method() == 'forkserver':
         ctx.set_forkserver_preload(['threat_planner.batch.worker'])
@@ -57,7 +57,7 @@ def run_local(chunks: list[list[Task]], workers: int) -> Iterator[list[dict]]:
     return _finished(pool, futures)
 
 
-def _finished(pool: ProcessPoolExecutor, futures: list) -> Iterator[list[dict]]:
+def _finished(pool: ProcessPoolExecutor | None, futures: list) -> Iterator[list[dict]]:
     try:
         for f in as_completed(futures):
             yield f.result()
@@ -66,4 +66,10 @@ def _finished(pool: ProcessPoolExecutor, futures: list) -> Iterator[list[dict]]:
                             'finished tasks are kept: the same command runs the rest'
                             ) from None
     finally:
-        pool.shutdown(wait=False, cancel_futures=True)
+        # Cancelled here, not by shutdown(cancel_futures=True): the executor's manager
+        # thread applies that only while the executor object lives, and it may be gone
+        # by then (a Ctrl-C then ran every queued chunk before the process could exit).
+        for f in futures:
+            f.cancel()
+        if pool is not None:
+            pool.shutdown(wait=False)

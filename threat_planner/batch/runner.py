@@ -8,6 +8,7 @@ in task order and ``report.md`` is written.
 
 from __future__ import annotations
 
+from contextlib import closing
 from dataclasses import dataclass
 import os
 from pathlib import Path
@@ -130,11 +131,14 @@ def run_batch(study_path: str | Path, out: str | Path, workers: int | None = Non
         count = 0
         if progress is not None and todo:
             progress(0, len(todo))
-        for rows in finished:
-            store.commit(rows)
-            count += len({r['task'] for r in rows})
-            if progress is not None:
-                progress(count, len(todo))
+        # Closed on any way out (Ctrl-C above all): the backend then cancels the chunks not
+        # started instead of running them all before the process may exit.
+        with closing(finished):
+            for rows in finished:
+                store.commit(rows)
+                count += len({r['task'] for r in rows})
+                if progress is not None:
+                    progress(count, len(todo))
         table = store.merge(tasks)
         from threat_planner.batch.report import write_report
         report = write_report(Path(out), table, study)
