@@ -235,6 +235,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--no-ray', action='store_true')
     ap.add_argument('--seed', type=int, default=27, help='of the kill moment')
     ap.add_argument('--out', type=Path, default=RESULTS / 'batch.md')
+    ap.add_argument('--no-robust', action='store_true', help='speed and resume only')
     args = ap.parse_args(argv)
     ray_address, ray_start, why = (None, float('nan'), 'skipped (--no-ray)') if args.no_ray \
         else start_ray(2)
@@ -246,7 +247,9 @@ def main(argv: list[str] | None = None) -> int:
         kr = kill_and_resume(work, Path(sp['study']), Path(sp['reference']),
                              sp['median_s']['local, 2 workers'], args.seed)
         print('robust', flush=True)
-        rb = robust(work, args.scenarios, args.samples, args.robust_samples)
+        rb = {'wall_s': float('nan'), 'samples': 0, 'robust_samples': 0, 'cases': []} \
+            if args.no_robust else robust(work, args.scenarios, args.samples,
+                                          args.robust_samples)
     result = {'speed': sp, 'kill_and_resume': kr, 'robust': rb, 'ray_start_s': ray_start,
               'ray_note': why, 'targets': TARGETS, 'cpus': os.cpu_count(),
               'load_average': os.getloadavg()}
@@ -311,7 +314,7 @@ def report(r: dict) -> str:
                      f"{c['robust_ms']:.0f} |")
         if c['change'] >= 0:
             worse.append(f"{c['scenario']} at w {c['w']:g} ({100 * c['change']:+.2f} %)")
-    changes = [c['change'] for c in rb['cases']]
+    changes = [c['change'] for c in rb['cases']] or [float('nan')]
     lines += ['', f"Robust lower in {sum(v < 0 for v in changes)} of {len(changes)} cases; "
               f"median change {100 * statistics.median(changes):+.2f} %, range "
               f"{100 * min(changes):+.2f} to {100 * max(changes):+.2f} %."
