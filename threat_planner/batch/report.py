@@ -88,22 +88,22 @@ def _figure_scenarios(study: Study) -> list[str]:
 
 
 def _grid(n: int):
-    import matplotlib
-    matplotlib.use('Agg')  # files only: no display is needed or wanted
-    import matplotlib.pyplot as plt
+    """Return a figure of n panels, three a row, and its axes (no pyplot: 1.1 s to import)."""
+    from matplotlib.figure import Figure
     cols = min(3, n)
     rows = -(-n // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
+    fig = Figure(figsize=(4.2 * cols, 3.2 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
     for ax in axes.flat[n:]:
         ax.set_visible(False)
-    return plt, fig, axes.flat
+    return fig, axes.flat
 
 
 def _plot_j(out: Path, plans: list[dict], names: list[str], study: Study) -> str:
     keys = _figure_scenarios(study)
     if not keys or len(study.w) < 2:
         return ''
-    plt, fig, axes = _grid(len(keys))
+    fig, axes = _grid(len(keys))
     for ax, key in zip(axes, keys):
         lines: dict[str, list] = defaultdict(list)
         for r in plans:
@@ -117,7 +117,6 @@ def _plot_j(out: Path, plans: list[dict], names: list[str], study: Study) -> str
         ax.legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(out / 'j_vs_w.png', dpi=100)
-    plt.close(fig)
     return 'j_vs_w.png'
 
 
@@ -153,7 +152,7 @@ def _plot_spread(out: Path, groups: dict, study: Study) -> str:
     keys = [k for k in _figure_scenarios(study) if any(g[0] == k for g in groups)]
     if not keys:
         return ''
-    plt, fig, axes = _grid(len(keys))
+    fig, axes = _grid(len(keys))
     colours = {'nominal': 'tab:blue', 'robust': 'tab:orange'}
     for ax, key in zip(axes, keys):
         data, labels, colour = [], [], []
@@ -172,5 +171,4 @@ def _plot_spread(out: Path, groups: dict, study: Study) -> str:
         ax.set_ylabel('J on the evaluation pictures')
     fig.tight_layout()
     fig.savefig(out / 'spread.png', dpi=100)
-    plt.close(fig)
     return 'spread.png'
