@@ -5,7 +5,8 @@ One folder per concern, each importing only the folders above it in this list:
 conversions, DEM terrain), :mod:`.inputs` (settings, PlannerConfig, scenario files),
 :mod:`.cost` (J, eq. 15-17), :mod:`.network` (§3.2-3.3), :mod:`.optimise` (§3.4 smoothing,
 L-BFGS, flight limits), :mod:`.methods` (paper, improved, best); then :mod:`.planner`
-(``plan()``) and :mod:`.result`. Nothing here imports rclpy or a message package, and no
+(``plan()``), :mod:`.result` and :mod:`.robust` (sampled threat pictures, ``plan_robust``).
+Nothing here imports rclpy or a message package, and no
 import runs back up this list (``test/test_layers.py`` checks both).
 """
 
