@@ -16,9 +16,9 @@ from typing import Iterator
 
 from threat_planner.batch import worker
 from threat_planner.batch.tasks import Task
-from threat_planner.errors import InputError
+from threat_planner.errors import InputError, PlanningError
 
-__all__ = ['INSTALL_HINT', 'RETRIES', 'connect', 'import_ray', 'run_ray']
+__all__ = ['INSTALL_HINT', 'RETRIES', 'cluster_cpus', 'connect', 'import_ray', 'run_ray']
 
 INSTALL_HINT = ("--ray: Ray is not installed; install it with pip install "
                 "'threat_planner[cluster]' (or pip install ray)")
@@ -98,11 +98,22 @@ def _check_reachable(address: str) -> None:
                          f'({exc.strerror or type(exc).__name__})') from None
 
 
+def cluster_cpus() -> int:
+    """Return the CPUs of the connected cluster (at least 1)."""
+    return max(1, int(import_ray().cluster_resources().get('CPU', 1)))
+
+
 def _finished(ray, pending: list, started: bool) -> Iterator[list[dict]]:
+    from ray.exceptions import NodeDiedError, WorkerCrashedError
     try:
         while pending:
             ready, pending = ray.wait(pending, num_returns=1)
-            yield ray.get(ready[0])
+            try:
+                yield ray.get(ready[0])
+            except (WorkerCrashedError, NodeDiedError) as exc:
+                raise PlanningError(f'batch --ray: a chunk\'s worker died {RETRIES + 1} '
+                                    f'times ({type(exc).__name__}); the finished tasks are '
+                                    'kept: the same command runs the rest') from None
     finally:
         for ref in pending:
             ray.cancel(ref, force=True)

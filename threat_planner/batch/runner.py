@@ -117,7 +117,11 @@ def run_batch(study_path: str | Path, out: str | Path, workers: int | None = Non
         tasks = task_list(study)
         done = store.done()
         todo = [t for t in tasks if t.key not in done]
-        n = workers or default_workers()
+        if ray is not None:
+            from threat_planner.batch.cluster import cluster_cpus
+            n = cluster_cpus()   # the chunks are spread over the cluster's CPUs
+        else:
+            n = workers or default_workers()
         groups = make_chunks(todo, n)
         if ray is not None:
             from threat_planner.batch.cluster import run_ray
