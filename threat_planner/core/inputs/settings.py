@@ -140,9 +140,10 @@ class Setting:
             return isinstance(value, bool)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             return False
-        if self.kind is int and value != int(value):
-            return False
+        # Finite first: int() of NaN or infinity raises instead of answering.
         if not math.isfinite(value):
+            return False
+        if self.kind is int and value != int(value):
             return False
         if self.lo is not None and (value <= self.lo if self.lo_open else value < self.lo):
             return False
