@@ -100,7 +100,7 @@ def robust_plan(scenario: Scenario, cfg: PlannerConfig, args: argparse.Namespace
 
 def robust_summary(scenario: Scenario, result: PlanResult, args: argparse.Namespace
                    ) -> tuple[str, dict]:
-    """The line ``plan --robust`` prints and the ``robust`` entry of its JSON."""
+    """Return the line ``plan --robust`` prints and the ``robust`` entry of its JSON."""
     from threat_planner.core.robust import picture_costs
     nominal = picture_costs(result.path, [scenario.threats], result.w,
                             scenario.airspace or None)[0]
