@@ -7,47 +7,25 @@ itself is not under test; the comparison with the library uses the default 'best
 """
 
 import math
-import py_compile
 import signal
-import threading
 import time
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Pose, PoseArray, PoseStamped
 from nav_msgs.msg import Path as PathMsg
 import numpy as np
 import pytest
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2, PointField
 from visualization_msgs.msg import MarkerArray
-import yaml
 
-from node_harness import (cloud, domain_id, info, planner_command, pose, PYTHON, REPO, RosClient,
-                          start_process, stop_process, VOLATILE)
-from threat_planner.bag import read_messages
-from threat_planner.core.inputs.scenario import load_scenario
-from threat_planner.core.planner import plan, PlannerConfig
+from node_fixtures import (_inten, _pos, _pose_array, DEEP_LATCHED, DOMAIN, expected_plan,
+                           FAST_MAX_THREATS, node_parameters, PlannerProcess, raw_cloud,
+                           run_in_thread, SCENARIO, SCENARIO_FILE, scenario_params)
+from node_harness import cloud, pose, PYTHON, RosClient, start_process, stop_process
+from threat_planner.core.planner import plan
 from threat_planner.core.world.threats import ThreatField
-from threat_planner.errors import InputError
-from threat_planner.ros.conversions import path_from_msg, stamp_to_ns, threats_from_pointcloud2
+from threat_planner.ros.conversions import path_from_msg
 from threat_planner.ros.parameters import PARAMETER_DEFAULTS, settings_from_parameters
-from threat_planner.ros.publisher import ThreatDrift
-from threat_planner.ros.worker import PlanWorker
-
-DOMAIN = domain_id(1)
-SCENARIO_FILE = REPO / 'test' / 'data' / 'uniform20_0.yaml'
-SCENARIO = load_scenario(SCENARIO_FILE)
-CONFIG_FILE = REPO / 'config' / 'planner.yaml'
-FAST_MAX_THREATS = 50
-# A flood publisher keeps every sample until delivered, so the node sees them all.
-DEEP_LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                          history=HistoryPolicy.KEEP_LAST, depth=100)
-
-
-def yaml_parameters():
-    return yaml.safe_load(CONFIG_FILE.read_text())['threat_planner']['ros__parameters']
 
 
 # ------------------------------------------------------------------- fixtures
@@ -58,72 +36,6 @@ def client():
     c = RosClient(DOMAIN, 'test_node_client')
     yield c
     c.close()
-
-
-class PlannerProcess:
-    """A planner node process and the client topics that go with its namespace."""
-
-    def __init__(self, client, ns, params, log_path):
-        self.client = client
-        self.ns = ns
-        self.log_path = log_path
-        self.proc = start_process(planner_command(ns, params), DOMAIN, log_path)
-        for name, msg_type in (('path', PathMsg), ('initial_path', PathMsg),
-                               ('plan_info', DiagnosticArray), ('network', MarkerArray)):
-            client.subscribe(self.topic(name), msg_type)
-        self.threats = client.publisher(self.topic('threats'), PointCloud2)
-        self.poses = client.publisher(self.topic('threat_poses'), PoseArray)
-        self.start = client.publisher(self.topic('start'), PoseStamped, VOLATILE)
-        self.goal = client.publisher(self.topic('goal_pose'), PoseStamped, VOLATILE)
-        for pub in (self.threats, self.poses, self.start, self.goal):
-            client.wait_matched(pub, timeout=30.0)
-
-    def topic(self, name):
-        return f'{self.ns}/{name}'
-
-    @property
-    def node_name(self):
-        return f'{self.ns}/threat_planner'
-
-    def infos(self):
-        return [info(m) for _, m in list(self.client.messages[self.topic('plan_info')])]
-
-    def last_seq(self):
-        infos = self.infos()
-        return int(infos[-1]['input_seq']) if infos else 0
-
-    def wait_info(self, pred=lambda i: True, after_seq=None, timeout=30.0):
-        """The first plan_info after input `after_seq` for which `pred` holds."""
-        after_seq = self.last_seq() if after_seq is None else after_seq
-        msg = self.client.wait_for(
-            self.topic('plan_info'),
-            lambda m: int(info(m)['input_seq']) > after_seq and pred(info(m)), timeout)
-        return info(msg)
-
-    def wait_plan(self, after_seq=None, timeout=60.0, pred=lambda i: True):
-        """The next successful plan's info, path and initial path (matched by stamp)."""
-        i = self.wait_info(lambda i: i['level'] != 'ERROR' and pred(i), after_seq, timeout)
-        stamp = int(i['input_stamp_ns'])
-        path = self.client.wait_for(self.topic('path'),
-                                    lambda m: stamp_to_ns(m.header.stamp) == stamp, 10.0)
-        initial = self.client.wait_for(self.topic('initial_path'),
-                                       lambda m: stamp_to_ns(m.header.stamp) == stamp, 10.0)
-        return i, path, initial
-
-    def alive(self):
-        return self.proc.poll() is None
-
-    def log(self):
-        return self.log_path.read_text(errors='replace')
-
-    def stop(self, sig=signal.SIGTERM):
-        return stop_process(self.proc, sig)
-
-
-def scenario_params(scenario=SCENARIO):
-    box = scenario.box
-    return {'bounds': box.lo.tolist() + box.hi.tolist(), 'start': scenario.start.tolist(),
-            'goal': scenario.goal.tolist()}
 
 
 @pytest.fixture(scope='module')
@@ -142,119 +54,6 @@ def fast_node(client, tmp_path_factory):
                           tmp_path_factory.mktemp('fast') / 'node.log')
     yield node
     assert node.stop() == 0, node.log()
-
-
-def expected_plan(msg, start, goal, params):
-    """What the library plans for the same (float32-rounded) cloud and parameters."""
-    positions, intensities = threats_from_pointcloud2(msg, 'map')
-    settings = settings_from_parameters(params)
-    return plan(ThreatField.from_arrays(positions, intensities), start, goal, settings.box,
-                settings.config)
-
-
-def node_parameters(**changes):
-    params = dict(yaml_parameters())
-    params.update(changes)
-    return params
-
-
-def run_in_thread(fn, *args):
-    """Run fn in a thread (numpy releases the GIL) and return a getter for its result."""
-    box = {}
-    thread = threading.Thread(target=lambda: box.update(result=fn(*args)))
-    thread.start()
-
-    def get():
-        thread.join()
-        return box['result']
-    return get
-
-
-# ------------------------------------------------------------ pure helpers
-
-
-def test_config_file_holds_the_node_defaults():
-    assert yaml_parameters() == PARAMETER_DEFAULTS
-    defaults = PlannerConfig()
-    for name in ('w', 'method', 'k', 'auto_k', 'damping', 'mass', 'q', 'n_points',
-                 'max_pitch_deg', 'max_turn_deg', 'entry_candidates', 'confine_to_box'):
-        assert PARAMETER_DEFAULTS[name] == getattr(defaults, name), name
-
-
-@pytest.mark.parametrize('change, reason', [
-    ({'w': 0.0}, 'w: must satisfy 0 < w < 1'),
-    ({'method': 'fastest'}, 'method: must be one of'),
-    ({'bounds': [0.0, 0.0, 0.0, 1.0, 1.0]}, 'bounds: expected 6 numbers'),
-    ({'bounds': [0.0, 0.0, 0.0, 1.0, -1.0, 1.0]}, 'bounds: max.y must exceed min.y'),
-    ({'start': [0.0, math.nan, 0.0]}, 'start: not finite'),
-    ({'goal': [1.0, 2.0]}, 'goal: expected [x, y, z], got 2 values'),
-    ({'frame_id': ''}, 'frame_id: must be a non-empty string'),
-    ({'default_intensity': 0.0}, 'default_intensity: must be finite and > 0'),
-    ({'max_threats': -1}, 'max_threats: must be an integer >= 0'),
-])
-def test_settings_refuse_bad_values(change, reason):
-    with pytest.raises(InputError, match=reason.replace('[', r'\[').replace(']', r'\]')):
-        settings_from_parameters({**PARAMETER_DEFAULTS, **change})
-
-
-def test_settings_accept_integer_arrays():
-    s = settings_from_parameters({**PARAMETER_DEFAULTS, 'bounds': [0, 0, 0, 10, 10, 10]})
-    assert s.box.hi.tolist() == [10.0, 10.0, 10.0]
-
-
-def test_plan_worker_runs_one_job_and_keeps_one_pending():
-    release = threading.Event()
-    started, done = [], []
-
-    def run(job):
-        started.append(job)
-        if job == 0:
-            release.wait(5.0)
-        done.append(job)
-
-    worker = PlanWorker(run)
-    assert worker.submit(0) is False
-    deadline = time.monotonic() + 5.0
-    while not worker.busy and time.monotonic() < deadline:
-        time.sleep(0.001)
-    skipped = [worker.submit(j) for j in range(1, 6)]
-    assert skipped == [False, True, True, True, True]
-    assert started == [0] and worker.has_pending
-    release.set()
-    while len(done) < 2 and time.monotonic() < deadline:
-        time.sleep(0.001)
-    assert done == [0, 5]
-    assert worker.stop()
-
-
-def test_threat_drift_is_deterministic_and_stays_in_bounds():
-    lo, hi = SCENARIO.box.lo, SCENARIO.box.hi
-    p0 = SCENARIO.threats.positions
-    for mode in ('random_walk', 'sinusoid'):
-        a = ThreatDrift(p0, lo, hi, 5.0, mode, seed=3)
-        b = ThreatDrift(p0, lo, hi, 5.0, mode, seed=3)
-        for tick in range(1, 40):
-            pa, pb = a.at(tick * 0.5, 0.5), b.at(tick * 0.5, 0.5)
-            np.testing.assert_array_equal(pa, pb)
-            assert np.all(pa >= lo) and np.all(pa <= hi)
-        assert np.max(np.linalg.norm(pa - p0, axis=1)) > 1.0
-    still = ThreatDrift(p0, lo, hi, 0.0)
-    np.testing.assert_array_equal(still.at(10.0, 1.0), p0)
-
-
-def test_launch_file_compiles(tmp_path):
-    py_compile.compile(str(REPO / 'launch' / 'planner.launch.py'),
-                       cfile=str(tmp_path / 'planner.launch.pyc'), doraise=True)
-    try:
-        import launch_ros  # noqa: F401
-    except ImportError:
-        pytest.skip('launch_ros is not installed: only compiled')
-    import importlib.util
-    spec = importlib.util.spec_from_file_location('planner_launch',
-                                                  REPO / 'launch' / 'planner.launch.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    assert module.generate_launch_description().entities
 
 
 # ------------------------------------------------------ planning with 'best'
@@ -381,50 +180,6 @@ def test_parameter_change_replans_and_bad_values_are_refused(fast_node):
     seq = fast_node.last_seq()
     assert client.set_parameters(fast_node.node_name, {'w': 0.5})[0].successful
     fast_node.wait_plan(after_seq=seq)
-
-
-def raw_cloud(positions, intensities, *, fields=None, point_step=16, frame='map', trim=0):
-    """A hand-made float32 cloud with a chosen field list, point_step or cut-off data."""
-    n = len(positions)
-    data = np.zeros((n, point_step), np.uint8)
-    values = np.column_stack([positions, intensities]).astype('<f4')
-    width = min(point_step, 16)
-    data[:, :width] = values.view(np.uint8).reshape(n, 16)[:, :width]
-    msg = PointCloud2()
-    msg.header.frame_id = frame
-    msg.height, msg.width = 1, n
-    msg.fields = fields if fields is not None else [
-        PointField(name=name, offset=4 * k, datatype=PointField.FLOAT32, count=1)
-        for k, name in enumerate(('x', 'y', 'z', 'intensity'))]
-    msg.point_step = point_step
-    msg.row_step = point_step * n
-    msg.data = data.tobytes()[:len(data.tobytes()) - trim]
-    msg.is_dense = True
-    return msg
-
-
-def _pos(**edit):
-    p = SCENARIO.threats.positions.copy()
-    for key, value in edit.items():
-        row, col = int(key[1:].split('_')[0]), 'xyz'.index(key[-1])
-        p[row, col] = value
-    return p
-
-
-def _inten(**edit):
-    f = SCENARIO.threats.intensities.copy()
-    for key, value in edit.items():
-        f[int(key[1:])] = value
-    return f
-
-
-def _pose_array(positions, frame='map'):
-    msg = PoseArray()
-    msg.header.frame_id = frame
-    msg.poses = [Pose() for _ in positions]
-    for p, (x, y, z) in zip(msg.poses, np.asarray(positions).tolist()):
-        p.position.x, p.position.y, p.position.z = x, y, z
-    return msg
 
 
 THREAT0 = np.float32(SCENARIO.threats.positions[0]).astype(float).tolist()
@@ -637,64 +392,3 @@ def test_threat_publisher_drives_replanning(fast_node, tmp_path, args, topic, pl
         assert fast_node.alive()
     finally:
         assert stop_process(proc) == 0, log.read_text()
-
-
-# --------------------------------------------------------------- recording
-
-
-def test_recording_holds_inputs_and_outputs(client, tmp_path):
-    target = tmp_path / 'run.mcap'
-    node = PlannerProcess(client, '/rec', {'method': 'paper', 'record': str(target)},
-                          tmp_path / 'node.log')
-    try:
-        node.start.publish(pose(SCENARIO.start, stamp=Time(sec=1)))
-        node.goal.publish(pose(SCENARIO.goal, stamp=Time(sec=2)))
-        node.threats.publish(cloud(SCENARIO.threats.positions, SCENARIO.threats.intensities,
-                                   stamp=Time(sec=3)))
-        node.wait_plan(after_seq=0, pred=lambda i: i['inputs_received'] == '3')
-        assert client.set_parameters(node.node_name, {'w': 0.7})[0].successful
-        node.wait_plan(after_seq=0, pred=lambda i: i['input_source'] == 'parameters')
-        node.threats.publish(cloud(_pos(p0_x=math.nan), _inten(), stamp=Time(sec=4)))
-        node.wait_info(lambda i: i['level'] == 'ERROR')
-        # Switch to folder mode at run time: the file is finished, a bag is started.
-        bags = tmp_path / 'bags'
-        assert client.set_parameters(node.node_name, {'record': str(bags)})[0].successful
-        seq = node.last_seq()
-        node.threats.publish(cloud(SCENARIO.threats.positions, SCENARIO.threats.intensities,
-                                   stamp=Time(sec=5)))
-        node.wait_plan(after_seq=seq)
-    finally:
-        code = node.stop(signal.SIGTERM)
-    assert code == 0, node.log()
-    assert 'closed recording' in node.log()
-
-    recorded = list(read_messages(target))  # strict: the file was finished
-    topics = {m.topic for m in recorded}
-    assert topics >= {'/rec/threats', '/rec/start', '/rec/goal_pose', '/parameter_events',
-                      '/rec/initial_path', '/rec/path', '/rec/network', '/rec/plan_info'}
-    by_topic = {t: [m for m in recorded if m.topic == t] for t in topics}
-    assert len(by_topic['/rec/threats']) == 2  # the good and the bad picture
-    events = by_topic['/parameter_events']
-    assert {p.name for p in events[0].msg.new_parameters} == set(PARAMETER_DEFAULTS)
-    assert [p.name for p in events[-1].msg.changed_parameters] == ['w']
-    # Outputs are logged when published, after the input they answer was received.
-    first_in = min(m.log_time_ns for m in by_topic['/rec/threats'])
-    assert all(m.log_time_ns >= first_in for m in by_topic['/rec/path'])
-    assert any(m.msg.status[0].level == 2 for m in by_topic['/rec/plan_info'])
-
-    bag_dirs = [d for d in bags.iterdir() if d.is_dir()]
-    assert len(bag_dirs) == 1 and (bag_dirs[0] / 'metadata.yaml').is_file()
-    in_bag = {m.topic for m in read_messages(bag_dirs[0])}
-    assert {'/rec/threats', '/rec/path', '/rec/plan_info', '/parameter_events'} <= in_bag
-
-
-def test_bad_start_up_parameters_exit_with_reason(tmp_path):
-    log = tmp_path / 'node.log'
-    proc = start_process(planner_command('/bad', {'w': 0.0}), DOMAIN, log)
-    assert proc.wait(30) == 1
-    assert 'cannot start: w: must satisfy 0 < w < 1' in log.read_text()
-    proc = start_process(planner_command('/bad', {'record': '/proc/forbidden/x.mcap'}),
-                         DOMAIN, log)
-    assert proc.wait(30) == 1
-    assert ('cannot start recording: /proc/forbidden/x.mcap: cannot create recording'
-            in log.read_text())
