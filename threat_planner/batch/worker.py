@@ -38,6 +38,13 @@ def initialise(parent: int | None = None) -> None:
     if _STATE['ready']:
         return
     _STATE['ready'] = True
+    # One thread in every library, as Ray sets for its tasks: 1,000 plans on 2 workers
+    # took 34-35 s against 25-27 s with OMP_NUM_THREADS=1 in the environment (alternated
+    # runs). BLAS was loaded, a thread per core, before this process forked: limited here;
+    # OpenMP (numba's threading layer) loads at the first parallel kernel and reads this.
+    os.environ['OMP_NUM_THREADS'] = '1'
+    from threadpoolctl import threadpool_limits
+    threadpool_limits(limits=1)
     try:
         import numba
         numba.set_num_threads(1)
