@@ -5,88 +5,22 @@ the box and reports the J that path_cost gives it, or raises one of the project'
 (ThreatPlannerError) with a one-line message; never another exception and never a hang.
 """
 
-import contextlib
 import math
-import os
-import signal
-import string
 
-from hypothesis import (assume, event, example, given, HealthCheck, Phase, settings,
-                        strategies as st)
-from hypothesis.control import currently_in_test_context
+from hypothesis import assume, example, given, strategies as st
 from hypothesis.extra.numpy import arrays
 import numpy as np
 import pytest
-import yaml
 
+from property_harness import (_guarded, _note, CHEAP, fractions, PLANS, scales, time_limit,
+                              unit_points)
 from threat_planner.core.cost.closed_form import CONTACT_DISTANCE, path_cost, segment_threat_costs
-from threat_planner.core.inputs.scenario import load_scenario, scenario_from_dict
 from threat_planner.core.network.partition import build_network
 from threat_planner.core.planner import plan, PlannerConfig
 from threat_planner.core.world.threats import Box, ThreatField
-from threat_planner.errors import ScenarioError, ThreatPlannerError
-
-#: Wall-time limit of one library call [s]; generous for a busy 2-core CI machine.
-CALL_TIMEOUT_S = 20
-
-_FAST = dict(database=None, derandomize=True, deadline=None,
-             suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
-CHEAP = settings(max_examples=300, **_FAST)
-#: Shrinking a failing plan() example can take minutes, so CI reports it unshrunk; set
-#: THREAT_PLANNER_SHRINK=1 to get the minimal example.
-_PLAN_PHASES = (tuple(Phase) if os.environ.get('THREAT_PLANNER_SHRINK')
-                else (Phase.explicit, Phase.generate))
-PLANS = settings(max_examples=60, phases=_PLAN_PHASES, **_FAST)
-
-
-class CallTimeout(Exception):
-    """A library call ran past CALL_TIMEOUT_S (deliberately not a ThreatPlannerError)."""
-
-
-@contextlib.contextmanager
-def time_limit(seconds=CALL_TIMEOUT_S):
-    """Raise CallTimeout in the main thread if the block runs longer than ``seconds``."""
-    def on_alarm(signum, frame):
-        raise CallTimeout(f'call exceeded {seconds} s')
-
-    previous = signal.signal(signal.SIGALRM, on_alarm)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
-
-
-def _check_message(exc):
-    msg = str(exc)
-    assert msg.strip(), f'{type(exc).__name__} with an empty message'
-    assert '\n' not in msg, f'multi-line message: {msg!r}'
-
-
-def _note(what):
-    """Count an outcome for --hypothesis-show-statistics (inside a hypothesis test only)."""
-    if currently_in_test_context():
-        event(what)
-
-
-def _guarded(fn, *args, **kwargs):
-    """Call fn under the time limit; return its value, or None after a project error."""
-    try:
-        with time_limit():
-            return fn(*args, **kwargs)
-    except ThreatPlannerError as exc:
-        _check_message(exc)
-        _note(f'raised {type(exc).__name__}: {str(exc).split(":")[0]}')
-        return None
 
 
 # ---------------------------------------------------------------------------- strategies
-
-#: Length scale of a scene; box sides are 1 to 10 times it, so from 1e-6 to 1e7.
-scales = st.floats(-6.0, 6.0).map(lambda e: 10.0 ** e)
-fractions = st.floats(0.0, 1.0)
-unit_points = arrays(float, 3, elements=fractions)
 
 
 @st.composite
@@ -369,88 +303,3 @@ def test_build_network_never_raises_and_neighbours_share_a_face(case):
     a, b = net.tetrahedra[net.edges[:, 0]], net.tetrahedra[net.edges[:, 1]]
     shared = (a[:, :, None] == b[:, None, :]).sum(axis=(1, 2))
     assert np.all(shared == 3), np.flatnonzero(shared != 3)
-
-
-# ---------------------------------------------------------------------------- scenarios
-
-#: Scalars a YAML document may hold: None, bools, ints of any size, any float, strings.
-junk_scalars = (st.none() | st.booleans() | st.integers()
-                | st.sampled_from([10 ** 400, -10 ** 400]) | st.floats() | st.text(max_size=8))
-junk = st.recursive(junk_scalars,
-                    lambda inner: st.lists(inner, max_size=4)
-                    | st.dictionaries(st.text(max_size=6), inner, max_size=4),
-                    max_leaves=12)
-numbers = st.floats(-10.0, 10.0) | st.integers(-10, 10)
-#: A coordinate or intensity: usually a number, sometimes one junk scalar or junk value.
-number_like = st.one_of(numbers, numbers, numbers, junk_scalars, junk)
-point_like = st.one_of(st.lists(number_like, min_size=3, max_size=3),
-                       st.lists(numbers, min_size=3, max_size=3), junk)
-threat_like = st.one_of(
-    st.fixed_dictionaries({'position': point_like, 'intensity': number_like}),
-    st.fixed_dictionaries({}, optional={'position': point_like, 'intensity': number_like}),
-    junk)
-
-
-@st.composite
-def scenario_dicts(draw):
-    """Scenario-shaped dicts whose fields are each absent, plausible or junk."""
-    fields = {
-        'bounds': st.one_of(
-            st.fixed_dictionaries({'min': point_like, 'max': point_like}),
-            st.fixed_dictionaries({}, optional={'min': point_like, 'max': point_like}), junk),
-        'start': point_like,
-        'goal': point_like,
-        'threats': st.lists(threat_like, max_size=3) | junk,
-        'name': junk,
-        'frame_id': junk,
-        'description': junk,
-    }
-    out = {}
-    for key, strategy in fields.items():
-        if draw(st.integers(0, 9)):
-            out[key] = draw(strategy)
-    return out
-
-
-@settings(max_examples=500, **_FAST)
-@example({'bounds': {'min': [0, 0, 0], 'max': [10 ** 400, 1, 1]}, 'start': [0, 0, 0],
-          'goal': [0, 0, 0], 'threats': []})
-@example({'bounds': {'min': [0, 0, 0], 'max': [1, 1, 1]}, 'start': [0, 0, 0],
-          'goal': [1, 1, 1], 'threats': [{'position': [0, 0, 0.5], 'intensity': -10 ** 400}]})
-@given(scenario_dicts() | junk)
-def test_scenario_from_dict_raises_only_scenario_error(data):
-    try:
-        with time_limit():
-            scenario_from_dict(data, 'junk.yaml')
-    except ScenarioError as exc:
-        _check_message(exc)
-
-
-def _mutate(text, where, what):
-    i = int(where * len(text))
-    return text[:i] + what + text[i:]
-
-
-#: YAML that parses but that PyYAML's constructors reject with ValueError, or too deep.
-YAML_TRAPS = ['a: 2001-13-14\n', 'start: !!float abc\n', 'x: !!int x\n', '{a: ' * 1000,
-              'bounds: !!timestamp 2001-02-30\n', '\t- a\n', '*x\n']
-yaml_texts = st.one_of(
-    st.sampled_from(YAML_TRAPS),
-    st.text(alphabet=string.printable, max_size=200),
-    scenario_dicts().map(lambda d: yaml.safe_dump(d, allow_unicode=True)),
-    st.builds(_mutate, scenario_dicts().map(lambda d: yaml.safe_dump(d)), fractions,
-              st.sampled_from(YAML_TRAPS + [':', '- ', '"', '&a ', '\x00'])))
-
-
-@CHEAP
-@example(b'[' * 2000)
-@example(b'\x80')
-@given(st.binary(max_size=200) | yaml_texts.map(lambda t: t.encode('utf-8', 'replace')))
-def test_load_scenario_raises_only_scenario_error(tmp_path_factory, blob):
-    path = tmp_path_factory.getbasetemp() / 'junk.yaml'
-    path.write_bytes(blob)
-    try:
-        with time_limit():
-            load_scenario(path)
-    except ScenarioError as exc:
-        _check_message(exc)
