@@ -30,9 +30,8 @@ plan-demo: venv
 demo: venv
 	$(BIN)/threat_planner_demo --scenario test/data/uniform20_0.yaml --figure demo_out/last_plan.png
 
-# Two workers (the 2-core CI machine), each test file whole in one of them.
 test: venv
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q
 
 bench: venv
 	$(BIN)/python -m bench benchmark
