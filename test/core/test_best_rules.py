@@ -39,19 +39,30 @@ def test_lead_is_over_the_next_distinct_basin():
     assert _lead(PROBLEM, ranked[:2]) == float('inf')
 
 
-def test_refined_margin_needs_a_feasible_distinct_runner_up():
+def test_refined_margin_is_the_screenings_capped_by_a_feasible_distinct_rival():
     best = _cand(100.0, 0.0)
     same = _cand(100.2, 0.4)
     other = _cand(103.0, 25.0)
-    # Only the same basin refined: no lead, whatever the screening said.
-    assert _refined_margin(PROBLEM, best, [best, same], 0.5) == 0.0
+    # Only the same basin refined: no rival, the screening's lead stands.
+    assert _refined_margin(PROBLEM, best, [best, same], 0.5) == 0.5
     # A distinct basin 3 % worse caps the screening's 5 % lead; a smaller one stands.
     assert _refined_margin(PROBLEM, best, [best, same, other], 0.05) == pytest.approx(0.03)
     assert _refined_margin(PROBLEM, best, [best, other], 0.01) == pytest.approx(0.01)
-    # An infeasible runner-up is no comparison, and an infeasible best has no lead.
-    assert _refined_margin(PROBLEM, best, [best, _cand(90.0, 25.0, False)], 0.05) == 0.0
+    # An infeasible runner-up is no comparison (it caps nothing) ...
+    assert _refined_margin(PROBLEM, best, [best, _cand(90.0, 25.0, False)], 0.05) == 0.05
+    # ... and an infeasible best has no lead.
     worst = _cand(100.0, 0.0, feasible=False)
     assert _refined_margin(PROBLEM, worst, [worst, other], 0.05) == 0.0
+
+
+def test_the_lead_is_the_least_one_known():
+    from threat_planner.core.methods.basins import known_lead
+    nan, inf = float('nan'), float('inf')
+    assert known_lead(0.05, 0.03) == 0.03 and known_lead(0.05, inf) == 0.05
+    assert known_lead(nan, 0.87) == 0.87       # a screening that met no slope caps nothing
+    assert known_lead(nan, inf) == 0.0         # nothing known: no warm start
+    assert known_lead(inf, inf) == inf         # every seed in one basin, none other refined
+    assert known_lead(-0.01, inf) == 0.0
 
 
 @pytest.mark.parametrize('name, crowded', [('big300_0', True), ('uniform20_0', False),
@@ -64,7 +75,11 @@ def test_crowded_fields_are_those_whose_threat_reach_exceeds_the_spacing(name, c
 
 
 def test_a_runner_up_is_finished_only_if_it_may_win():
-    """Compared at the coarse level: same basin or clearly worse stops it, close goes on."""
+    """Same basin stops it at any level; clearly worse only at the last coarse level.
+
+    Close, breaking a limit, or at a coarser level (J far from the final one there) it is
+    refined on.
+    """
     class Costs(SimpleNamespace):
         def cost(self, points):
             return SimpleNamespace(J=self.j[round(float(points[4, 0] - 50.0), 3)])
@@ -73,11 +88,14 @@ def test_a_runner_up_is_finished_only_if_it_may_win():
                     j={0.0: 100.0, 0.5: 100.2, 20.0: 100.0 * (1 + 2 * RUNNER_UP_MARGIN),
                        30.0: 100.0 * (1 + RUNNER_UP_MARGIN / 2)})
     mine = _path(0.0)
-    assert _runner_up_lead(problem, mine, _path(0.5), True) == 0.0
+    # best's own basin: no rival, a lead that caps nothing
+    assert _runner_up_lead(problem, mine, _path(0.5), True) == float('inf')
+    assert _runner_up_lead(problem, mine, _path(0.5), False, last=False) == float('inf')
     assert _runner_up_lead(problem, mine, _path(20.0), True) == pytest.approx(
         2 * RUNNER_UP_MARGIN)
+    assert _runner_up_lead(problem, mine, _path(20.0), True, last=False) is None
+    assert _runner_up_lead(problem, mine, _path(20.0), False) is None
     assert _runner_up_lead(problem, mine, _path(30.0), True) is None
-    assert _runner_up_lead(problem, mine, _path(30.0), False) == 0.0
 
 
 def test_the_runner_up_gate_compares_level_by_level_and_records_its_verdict():
@@ -141,9 +159,9 @@ def test_a_crowded_field_refines_the_box_only_ranking_first(name, held_first, mo
 def test_a_seed_through_a_threat_never_wins(monkeypatch):
     """strongweak_0's straight line crosses a threat (J inf) yet meets the slopes: with two
     screening rounds it ranked first and was returned as the plan (PlanningError)."""
-    from threat_planner.core.methods import best
+    from threat_planner.core.methods import basins
     from threat_planner.core.planner import plan, PlannerConfig
-    monkeypatch.setattr(best, 'SLOPE_SCREEN_ROUNDS', 2)
+    monkeypatch.setattr(basins, 'SLOPE_SCREEN_ROUNDS', 2)
     sc = load_scenario(DATA / 'strongweak_0.yaml')
     result = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.5))
     assert np.isfinite(result.cost.J) and result.feasible
@@ -155,24 +173,24 @@ def test_a_seed_through_a_threat_never_wins(monkeypatch):
 def test_the_slope_screening_leaves_out_only_seeds_that_cannot_rank_in_the_first_two(
         monkeypatch):
     """Box-only optima whose J is past the second-best held J: the top two are unchanged."""
-    from threat_planner.core.methods import best
+    from threat_planner.core.methods import basins, best
     from threat_planner.core.planner import plan, PlannerConfig
     seen = {}
-    real = best._slope_screening
+    real = basins.slope_screening
 
-    def spy(p, screened, bounds, cutoff, optimal):
+    def spy(p, screened, bounds, cutoff, optimal, tolerance):
         calls = []
-        original = best.minimise_cost
-        monkeypatch.setattr(best, 'minimise_cost',
+        original = basins.minimise_cost
+        monkeypatch.setattr(basins, 'minimise_cost',
                             lambda *a, **k: calls.append(1) or original(*a, **k))
-        pruned = real(p, screened, bounds, cutoff, optimal)
+        pruned = real(p, screened, bounds, cutoff, optimal, tolerance)
         n_pruned = len(calls)
-        full = real(p, screened, bounds, cutoff, set())
-        monkeypatch.setattr(best, 'minimise_cost', original)
+        full = real(p, screened, bounds, cutoff, set(), tolerance)
+        monkeypatch.setattr(basins, 'minimise_cost', original)
         seen.update(pruned=pruned, full=full, runs=(n_pruned, len(calls) - n_pruned))
         return pruned
 
-    monkeypatch.setattr(best, '_slope_screening', spy)
+    monkeypatch.setattr(best, 'slope_screening', spy)
     sc = load_scenario(DATA / 'uniform20_1.yaml')
     plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.2))
     pruned, full = seen['pruned'][0], seen['full'][0]
@@ -297,6 +315,8 @@ def test_each_rescue_run_starts_at_a_higher_penalty_until_it_meets_the_limits(mo
                 first.append(name)
             # The first refined basin stalls (also when refined again from the start).
             return dataclasses.replace(cand, limit_check=stalled) if name in first else cand
+        if not kw.get('respace'):
+            return cand      # not a rescue run: the winner's polish (best._polish)
         seen.append(kw['penalty'])
         return cand if len(seen) >= 3 else dataclasses.replace(cand, limit_check=stalled)
 

@@ -15,26 +15,20 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from threat_planner.core.methods.basins import (basin_lead, COARSE_SEGMENTS, refined_margin,
-                                                runner_up_gate, same_basin)
+from threat_planner.core.methods.basins import (basin_lead, COARSE_SEGMENTS, known_lead,
+                                                refined_margin, runner_up_gate, same_basin,
+                                                slope_screening)
 from threat_planner.core.methods.problem import Candidate, Problem, smooth_route
 from threat_planner.core.network.search import alternative_routes, nearest_nodes, segment_costs
 from threat_planner.core.network.seeds import surface_routes
-from threat_planner.core.optimise.limits import check_limits, FlightLimits
 from threat_planner.core.optimise.optimisation import is_crowded, minimise_cost, PENALTY_START
 from threat_planner.core.optimise.smoothing import check_angles, resample
-from threat_planner.core.world.threats import Box
 
 __all__ = ['plan_best', 'refine', 'repair']
 
 #: Stopping tolerance of the coarse screening minimisation (its segments, at which basins
 #: are told apart too: basins.COARSE_SEGMENTS).
 COARSE_TOLERANCE = 1e-4
-#: L-BFGS iterations and augmented Lagrangian rounds of the slope-held screening (a
-#: ranking: measured against 200 and 6 on the 21 bundled cases, 15 % less time, final J
-#: within 0.04 % either way).
-SLOPE_SCREEN_ITERATIONS = 40
-SLOPE_SCREEN_ROUNDS = 3
 #: Largest (segment, threat) pairs per optimiser evaluation counted in full.
 OPTIMISER_DENSE_PAIRS = 4_000
 #: The same, and the surface lattice's exact-cost limit, in a crowded field without
@@ -66,6 +60,11 @@ RESCUE_GROWTH = 10.0
 RESCUE_MARGIN = 0.1
 #: Bisection steps of the last-resort repair towards the straight line.
 REPAIR_BISECTIONS = 20
+#: First penalty of a warm replan's rounds (and the winner's polish), from the previous
+#: path as it is: it meets the limits, and a low penalty let the first round leave it and
+#: come back elsewhere. The 21 bundled cases after every threat moved 1 mm, warm J at most
+#: 1e-6 above a cold plan's: 16 at 10, 18 at 100, 14 at 1000.
+WARM_PENALTY = 100.0
 
 
 def plan_best(p: Problem) -> Candidate:
@@ -153,7 +152,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     # (Surface routes have their own point counts: compare at the coarse resolution.)
     margin = basin_lead(p, [(j, path) for j, _, _, path in screened])
     order = [(name, seq, coarse, False) for _, name, seq, coarse in screened]
-    held_margin = 0.0
+    held_margin = float('nan')     # not known (no slope limit to hold)
     # In a crowded field 8 segments through threats whose reach exceeds their spacing
     # rank the basins as unreliably as the coarse levels would (optimisation.py): one
     # more basin is refined there. Measured on big300_0 at w 0.2 / 0.5 / 0.8 with the turn
@@ -164,7 +163,8 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     crowded = is_crowded(threats, p.box)
     basins, tries = BOUND_BASINS + crowded, FEASIBILITY_TRIES + crowded
     if p.limits.climb_on or p.limits.dive_on:
-        held, held_margin = _slope_screening(p, screened, bounds, cutoff, optimal)
+        held, held_margin = slope_screening(p, screened, bounds, cutoff, optimal,
+                                            COARSE_TOLERANCE)
         # Elsewhere the slope-held ranking first: its winner is the basin as flown (first
         # the box-only winner: uniform20_1 refined two basins that never met the limits).
         order = _interleave(order, held) if crowded else _interleave(held, order)
@@ -194,15 +194,17 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
         if _usable(best) and (feasible >= basins or not bound):
             break
     best = _rescue(p, best, refined)
+    if bound and _usable(best):
+        best = _polish(p, best)
     if not bound and not p.limits.any_constraint:
         best, margin = _surface_alternative(p, best, order, routes[0], margin)
     # The warm-start rule's lead: the screening's where the limits did not bind; where
     # they did, the slope-held screening's, capped by the lead over the next distinct
-    # basin refined under the limits (none refined: no lead; see _refined_margin).
+    # basin refined under the limits (see basins.refined_margin).
     if not bound:
         best.basin_margin = margin
     elif runner_lead is not None and best.limit_check.feasible:
-        best.basin_margin = max(min(held_margin, runner_lead), 0.0)
+        best.basin_margin = known_lead(held_margin, runner_lead)
     else:
         best.basin_margin = refined_margin(p, best, refined, held_margin)
     if not best.limit_check.feasible:
@@ -245,13 +247,34 @@ def _rescue(p: Problem, best: Candidate, refined: list[Candidate]) -> Candidate:
         again = cand
         for k in range(RESCUE_TRIES):
             again = refine(p, again.final, cand.seq, f'{cand.seed}, rounds again', warm=True,
-                           penalty=PENALTY_START * RESCUE_GROWTH ** k)
+                           penalty=PENALTY_START * RESCUE_GROWTH ** k, respace=True)
             if _usable(again):
                 break
         if _usable(again) and (not _usable(best) or again.cost.J < best.cost.J):
             again.limits_bound, again.levels = True, cand.levels
             return again
     return best
+
+
+def _polish(p: Problem, best: Candidate) -> Candidate:
+    """Return best, or its rounds again from its own path as a warm replan runs them.
+
+    The finest level stops on a small gain after rounds that started where the coarser
+    answer, subdivided, broke the turn radius: the same candidate of one field ended up to
+    0.5 % apart with the threats moved 1 um. The rounds again from the path as it is (it
+    meets the limits; WARM_PENALTY, tolerance 1e-8) lowered J on 14 of the 21 bundled
+    cases (up to 5.3e-4, the others unchanged) and, over python -m bench perturbation's 66
+    cases, left 5 cases above 0.1 % of the unmoved J against 7 (largest 1.0034 against
+    1.0244), for 6 % more time at 20 threats and 12-17 % on the random fields.
+    """
+    if len(best.final) != p.config.n_points + 1:
+        return best
+    again = refine(p, best.final, best.seq, best.seed, tolerance=1e-8, warm=True,
+                   penalty=WARM_PENALTY)
+    if not (_usable(again) and again.cost.J < best.cost.J):
+        return best
+    again.limits_bound, again.levels = True, best.levels
+    return again
 
 
 def _surface_alternative(p: Problem, best: Candidate, order: list, route: list[int],
@@ -285,58 +308,6 @@ def _surface_alternative(p: Problem, best: Candidate, order: list, route: list[i
 def _usable(c: Candidate) -> bool:
     """Whether a candidate meets the limits with a finite J (not through a threat)."""
     return bool(c.limit_check.feasible and np.isfinite(c.cost.J))
-
-
-def _slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: float | None,
-                     optimal: set[str]) -> tuple[list[tuple], float]:
-    """Rank the screened seeds again, held to the climb and dive limits, best first.
-
-    The slope limits mean the same at 8 segments as at n_points (the turn radius does
-    not: 8 segments cannot turn on a 10 m circle), so this ranks the basins as flown: a
-    limit-free basin that climbs a wall may lose to one that does not. Seeds the coarse
-    run could not bring within the slopes rank last. Returns the ranking and the lead of
-    its best basin over the next distinct one (:func:`_lead`).
-
-    Seeds named in ``optimal`` are box-only optima already, whose J holding the slopes
-    can only rise from: one whose J is already at least the second-best held J cannot
-    rank in the first two, and is left out (on the 21 bundled cases: 12 % fewer L-BFGS
-    runs in all, J within 0.001 %).
-    """
-    lim = p.limits
-    slopes = FlightLimits(lim.max_climb_deg, lim.max_dive_deg, 0.0, lim.min_altitude_m)
-    floor = float(p.box.lo[2])
-    # Every distinct seed: re-screening only the best 4 lost 10 % J on uniform20_1 at
-    # w = 0.8. A seed that screened into the basin of a better-ranked one would repeat
-    # its run; the others run surface routes (not minimised yet) first.
-    kept: list[NDArray] = []
-    todo = []
-    for j_box, name, seq, coarse in screened:
-        key = resample(coarse, COARSE_SEGMENTS)
-        if not any(same_basin(p, key, k, resampled=True) for k in kept):
-            kept.append(key)
-            todo.append((name in optimal, j_box, name, seq, key))
-    todo.sort(key=lambda item: item[0])
-    held, skipped = [], []
-    for bounded, j_box, name, seq, start in todo:
-        done = sorted(item[1] for item in held if not item[0])
-        if bounded and len(done) >= 2 and j_box >= done[1]:
-            skipped.append(j_box)
-            continue
-        res = minimise_cost(start, p.threats, p.config.w, bounds, slopes, cutoff=cutoff,
-                            constrained_iterations=SLOPE_SCREEN_ITERATIONS,
-                            constrained_rounds=SLOPE_SCREEN_ROUNDS,
-                            tolerance=COARSE_TOLERANCE)
-        j = p.cost(res.points).J
-        # Through a threat (J inf: a line the minimiser cannot move off) ranks last too.
-        ok = check_limits(res.points, slopes, floor).feasible and np.isfinite(j)
-        held.append((not ok, j, f'{name} (slopes held)', seq, res.points, res.constrained))
-    held.sort(key=lambda item: item[:2])
-    feasible = [(item[1], item[4]) for item in held if not item[0]]
-    lead = basin_lead(p, feasible) if feasible else 0.0
-    if feasible and skipped and feasible[0][0] > 0:
-        # A left-out seed may be the next distinct basin: its J bounds the lead.
-        lead = min(lead, min(skipped) / feasible[0][0] - 1.0)
-    return [item[2:] for item in held], lead
 
 
 def _interleave(first: list, second: list) -> list:
@@ -383,7 +354,7 @@ def repair(p: Problem, cand: Candidate) -> Candidate:
 def refine(p: Problem, start: NDArray, seq: list[int], name: str,
            tolerance: float = 1e-6, warm: bool = False, box_broken: bool = False,
            gate: Callable[[NDArray], bool] | None = None,
-           penalty: float = PENALTY_START) -> Candidate:
+           penalty: float | None = None, respace: bool = False) -> Candidate:
     """Minimise J from a path of n_points segments inside the box and the flight limits.
 
     Parameters
@@ -400,10 +371,11 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
         Relative J decrease per iteration below which L-BFGS stops.
     warm : bool
         The start is a previous plan: straight to the constrained rounds if it is feasible.
-    box_broken, gate, penalty
+    box_broken, gate, penalty, respace
         As :func:`.optimisation.minimise_cost`: the basin's box-only optimum breaks the
         limits; stop at a coarser level (the candidate's path then at its resolution);
-        the rounds' first penalty.
+        the rounds' first penalty (None: PENALTY_START, WARM_PENALTY for a warm start);
+        a warm start evenly resampled first (the rescue's runs) or taken as it is.
 
     Returns
     -------
@@ -411,10 +383,12 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
 
     """
     cfg = p.config
+    if penalty is None:
+        penalty = WARM_PENALTY if warm else PENALTY_START
     opt = minimise_cost(start, p.threats, cfg.w, p.box if cfg.confine_to_box else None,
                         p.limits, tolerance=tolerance, constrained_only=warm,
                         cutoff=_optimiser_cutoff(cfg.n_points, p),
-                        box_broken=box_broken, gate=gate, penalty=penalty)
+                        box_broken=box_broken, gate=gate, penalty=penalty, respace=respace)
     return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
                      smoothed=None, smoothed_cost=None, final=opt.points, k=float('nan'),
                      steps=0, converged=True, cost=p.cost(opt.points),

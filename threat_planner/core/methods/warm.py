@@ -6,14 +6,18 @@ the box diagonal, and the new start lies within WARM_START_SHIFT of the previous
 (a vehicle flying it). The partition, edge costs, route search and basin screening are
 then skipped: they depend only on the threats, which barely moved, and their answer was
 the previous path's basin. The previous path from the point nearest the new start is
-refined under the limits. Rule that guards "no worse than a cold plan": the warm start is
-refused (cold plan) when the previous plan's basin led the next by less than
-WARM_BASIN_MARGIN in J (a 1 % move could swap them). That lead is the screening's where
-the flight limits did not bind; where they did, the screening (which holds no turn radius)
-says nothing, and the lead is that of the best basin refined under the limits over the
-next distinct one refined under them (none refined: no lead, cold). The warm result is
-dropped for a cold plan when it breaks a limit the previous plan met. Crowded fields
-(threat reach at least the spacing, :func:`.optimisation.is_crowded`) always plan cold.
+refined under the limits (as it is when the start is on its first segment: resampled
+evenly, its corners broke the turn radius). Rule that guards "no worse than a cold plan"
+and is the tie rule of issue 28 (a replan keeps the previous plan's basin unless the move
+could overturn its lead): the warm start is refused (cold plan) when the previous plan's
+basin led the next by less than WARM_BASIN_MARGIN in J times the largest threat move over
+WARM_THREAT_SHIFT of the diagonal (a 1 % move could swap basins 2 % apart; a 1 mm move in
+a 100 m box swaps none that a cold plan tells apart), or by nothing. That lead is the
+screening's where the flight limits did not bind; where they did, the slope-held
+screening's, capped by the lead over the next distinct basin refined under all the
+limits. The warm result is dropped for a cold plan when it breaks a limit the previous
+plan met. Crowded fields (threat reach at least the spacing,
+:func:`.optimisation.is_crowded`) always plan cold.
 """
 
 from __future__ import annotations
@@ -31,7 +35,8 @@ __all__ = ['WARM_BASIN_MARGIN', 'WARM_START_SHIFT', 'WARM_THREAT_SHIFT', 'warm_p
 WARM_THREAT_SHIFT = 0.01
 #: Largest distance of the new start from the previous path, fraction of the diagonal.
 WARM_START_SHIFT = 0.01
-#: Smallest lead of the previous best basin over the second for a warm replan.
+#: Smallest lead of the previous best basin over the second for a warm replan after a
+#: move of WARM_THREAT_SHIFT (in proportion below).
 WARM_BASIN_MARGIN = 0.02
 
 
@@ -85,6 +90,7 @@ def warm_path(previous: object, threats: ThreatField, s: NDArray, t: NDArray, bo
     if len(threats) != len(p_threats) or not np.allclose(
             threats.intensities, p_threats.intensities, rtol=1e-9, atol=0.0):
         return None, 'cold: threats added, removed or changed intensity'
+    shift = 0.0
     if len(threats):
         shift = float(np.max(np.linalg.norm(threats.positions - p_threats.positions, axis=1)))
         if shift > WARM_THREAT_SHIFT * diag:
@@ -95,10 +101,13 @@ def warm_path(previous: object, threats: ThreatField, s: NDArray, t: NDArray, bo
         return None, 'cold: crowded field (threat reach >= spacing), its basins shift'
     if previous.basin_margin == 0.0:
         return None, 'cold: the flight limits bound the previous plan, no second basin to compare'
-    if previous.basin_margin < WARM_BASIN_MARGIN:
-        return None, f'cold: basins within {100 * previous.basin_margin:.2g} % of each other'
+    if previous.basin_margin < WARM_BASIN_MARGIN * shift / (WARM_THREAT_SHIFT * diag):
+        return None, (f'cold: basins within {100 * previous.basin_margin:.2g} % of each other '
+                      f'(a threat moved {shift:.3g} m)')
     k, _, dist = _project(previous.path, s)
     if dist > WARM_START_SHIFT * diag:
         return None, f'cold: start {dist:.3g} m off the previous path'
+    if k == 0 and len(previous.path) == config.n_points + 1:
+        return np.vstack([s, previous.path[1:]]), 'warm'
     path = np.vstack([s, previous.path[k + 1:]])
     return resample(path, config.n_points), 'warm'

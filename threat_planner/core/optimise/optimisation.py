@@ -104,7 +104,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
                   constrained_iterations: int = 200, constrained_rounds: int = MAX_OUTER,
                   constrained_only: bool = False, box_broken: bool = False,
                   gate: Callable[[NDArray], bool] | None = None,
-                  penalty: float = PENALTY_START) -> OptimisationResult:
+                  penalty: float = PENALTY_START, respace: bool = True) -> OptimisationResult:
     """Minimise J over the interior vertices within the box and the flight limits.
 
     Parameters
@@ -145,6 +145,10 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         finer levels are worth their cost.
     penalty : float
         First penalty of every level's augmented Lagrangian rounds (scaled objective).
+    respace : bool
+        With ``constrained_only``, resample the start evenly first; False: the rounds
+        start from it as it is where it has the path's segments (a previous plan, whose
+        spacing holds its corners: resampled evenly, the turns it met broke the radius).
 
     Returns
     -------
@@ -205,7 +209,10 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         finest = count == n - 1
         if levels and gate is not None and gate(levels[-1]):
             return stats.result(levels[-1], True, tuple(levels))
-        path = _prolong(x, count) if finest else resample(x, count)
+        if finest and skip and not respace and count == n - 1:
+            path = x
+        else:
+            path = _prolong(x, count) if finest else resample(x, count)
         lvl = level if finest else probe if count == probe.n - 1 else _Level(
             path, threats, w, box, limits, cutoff, COARSE_LEVEL_TOLERANCE, stats, smooth)
         x, lam, best = lvl.constrained(path, lam, penalty, constrained_iterations,

@@ -1,0 +1,116 @@
+"""Issue 28: a replan after a move of the threats no user could mean keeps its J.
+
+A planner in a loop replans every new threat picture from its last plan (``warm_start``,
+as the node does). Moving every threat of a random field by at most 1 um must then leave J
+within 0.1 % of the plan's or lower (issue 28's target): the replan keeps the previous
+plan's basin (core/methods/warm.py's tie rule) and refines the previous path as it is.
+The fields: 12-35 threats at the bundled density, start and goal on opposite box edges,
+flight limits on (the defaults), w 0.2 / 0.5 / 0.8, and the straight line climbing at most
+20 deg (nearer the 30 deg limit no seed meets the slopes at the screening's 8 segments,
+more plans know no lead over another basin and replan cold, and cold plans there still
+jump: bench/results/perturbation.md).
+
+On the starting code of issue 28 (3609ebb) the replan was cold wherever the limits bound
+and no second basin had been refined under them (and from the previous path resampled
+evenly where it was warm): over seeds 0-399 (n 12 / 20 / 35, w 0.5 / 0.8, a third of the
+pairs) 7 replans came out more than 0.1 % higher, seed 361 (n 35, w 0.8) +51 % and seed 298
+(n 20, w 0.8) +7.4 %; both are explicit examples here and run every time. With the change,
+none of those replans is higher (one is 0.15 % lower).
+"""
+
+from hypothesis import example, given, HealthCheck, settings, strategies as st
+import numpy as np
+import pytest
+
+from threat_planner.core.planner import plan, PlannerConfig
+from threat_planner.core.world.threats import Box, ThreatField
+
+#: Largest relative rise of J allowed from the plan to its replan.
+TOLERANCE = 1e-3
+#: Largest move of a threat [m].
+MOVE = 1e-6
+
+
+def field(seed: int, n: int):
+    """Threats, start, goal and box of one random field (seeded)."""
+    rng = np.random.default_rng([28, seed, n])
+    side = 100.0 * (n / 20.0) ** (1.0 / 3.0)
+    threats = ThreatField.from_arrays(rng.uniform(0.05 * side, 0.95 * side, (n, 3)),
+                                      rng.uniform(1e5, 4e5, n) * rng.uniform(0.3, 3.0, n))
+    z = rng.uniform(0.0, side)
+    rise = np.tan(np.radians(20.0)) * np.sqrt(2.0) * side
+    s = np.array([0.0, 0.0, z])
+    t = np.array([side, side, np.clip(z + rng.uniform(-rise, rise), 0.0, side)])
+    return threats, s, t, Box.from_corners([0.0] * 3, [side] * 3)
+
+
+@settings(max_examples=12, derandomize=True, database=None, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 10_000), n=st.sampled_from([12, 20, 35]),
+       w=st.sampled_from([0.2, 0.5, 0.8]))
+@example(seed=361, n=35, w=0.8)
+@example(seed=298, n=20, w=0.8)
+def test_a_replan_after_a_micrometre_move_keeps_its_j(seed, n, w):
+    threats, s, t, box = field(seed, n)
+    cfg = PlannerConfig(w=w)
+    first = plan(threats, s, t, box, cfg)
+    d = np.random.default_rng(seed).normal(size=threats.positions.shape)
+    d *= MOVE * np.random.default_rng(seed + 1).uniform(0.0, 1.0, (n, 1)) / np.linalg.norm(
+        d, axis=1)[:, None]
+    moved = ThreatField.from_arrays(threats.positions + d, threats.intensities)
+    again = plan(moved, s, t, box, cfg, warm_start=first)
+    assert first.feasible and again.feasible
+    assert again.cost.J <= (1.0 + TOLERANCE) * first.cost.J, (
+        first.cost.J, again.cost.J, first.seed, again.seed, again.warm_note)
+
+
+def _bundled(name):
+    from pathlib import Path
+    from threat_planner.core.inputs.scenario import load_scenario
+    return load_scenario(Path(__file__).resolve().parents[1] / 'data' / f'{name}.yaml')
+
+
+def test_a_replan_from_the_same_start_refines_the_previous_path_as_it_is():
+    """Resampled evenly, the previous path's corners broke the turn radius (w 0.8)."""
+    from threat_planner.core.methods.warm import warm_path
+    from threat_planner.core.optimise.limits import check_limits, FlightLimits
+    from threat_planner.core.optimise.smoothing import resample
+    sc = _bundled('uniform20_0')
+    cfg = PlannerConfig(w=0.8)
+    first = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
+    moved = ThreatField.from_arrays(sc.threats.positions + 1e-3, sc.threats.intensities)
+    path, note = warm_path(first, moved, sc.start, sc.goal, sc.box, cfg)
+    assert note == 'warm' and np.array_equal(path, first.path)
+    limits, floor = FlightLimits.of(cfg), float(sc.box.lo[2])
+    assert check_limits(path, limits, floor).feasible
+    assert not check_limits(resample(first.path, cfg.n_points), limits, floor).feasible
+
+
+@pytest.mark.parametrize('move, warm', [(1e-3, True), (0.5, False)])
+def test_the_lead_a_warm_replan_needs_grows_with_the_move(move, warm):
+    """A 0.1 % lead holds against a 1 mm move (2e-5 % needed), not a 0.5 m one (0.6 %)."""
+    import dataclasses
+    from threat_planner.core.methods.warm import warm_path
+    sc = _bundled('weak20_0')
+    cfg = PlannerConfig(w=0.5)
+    first = dataclasses.replace(plan(sc.threats, sc.start, sc.goal, sc.box, cfg),
+                                basin_margin=1e-3)
+    moved = ThreatField.from_arrays(sc.threats.positions + move / np.sqrt(3.0),
+                                    sc.threats.intensities)
+    _, note = warm_path(first, moved, sc.start, sc.goal, sc.box, cfg)
+    assert (note == 'warm') == warm
+    assert warm or note.startswith('cold: basins within 0.1 %')
+
+
+def test_the_winner_is_polished_never_above_its_unpolished_j(monkeypatch):
+    """Its rounds again from its own path (best._polish): lower or the same, never higher."""
+    from threat_planner.core.methods import best
+    sc = _bundled('uniform20_0')
+    j = {}
+    for label in ('polished', 'plain'):
+        if label == 'plain':
+            monkeypatch.setattr(best, '_polish', lambda p, cand: cand)
+        j[label] = [plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=w)).cost.J
+                    for w in (0.2, 0.5)]
+    assert all(a <= b for a, b in zip(j['polished'], j['plain']))
+    assert j['polished'][1] < (1.0 - 1e-4) * j['plain'][1]    # 155.06 -> 154.97 measured
