@@ -22,6 +22,11 @@ where its J stayed within 1e-6 of the cold plan of the moved field or below.
 ``--tree`` plans with another checkout's ``threat_planner`` (e.g. a ``git worktree`` of
 an older commit, for a before / after pair of reports written by this one suite): the
 package is imported only once ``main`` has put that checkout first on ``sys.path``.
+
+``--quality BASE`` writes instead the quality gate of issue 28 (QUALITY_OUT): every bundled
+scenario (``test/data/*.yaml``, airspace ones with their zones and terrain) at w 0.2 / 0.5
+/ 0.8, limits on and off (``big300_0`` off only), planned by BASE and by this checkout,
+each in a process of its own, J before and after side by side.
 """
 
 from __future__ import annotations
@@ -40,6 +45,9 @@ from bench.toolkit.repo import RESULTS, ROOT
 from bench.toolkit.timing import timed
 
 OUT = RESULTS / 'perturbation.md'
+QUALITY_OUT = RESULTS / 'perturbation_quality.md'
+#: A bundled plan counts as higher when J rose by more than this fraction (the gate).
+QUALITY_SLACK = 1e-6
 #: How far every threat moves [m], and the fields per size.
 MOVES = (1e-9, 1e-6, 1e-3)
 SEEDS = 3
@@ -161,18 +169,87 @@ def markdown(rows: list[dict], commit: str = '') -> str:
     return '\n'.join(lines) + '\n'
 
 
+def bundled_plans() -> dict:
+    """Return {case: [J, feasible, seed]} of every bundled scenario, w and limits."""
+    from threat_planner import load_scenario, plan, PlannerConfig
+    from threat_planner.core.inputs.settings import NO_LIMITS
+    out = {}
+    for path in sorted((ROOT / 'test' / 'data').glob('*.yaml')):
+        sc = load_scenario(path)
+        for w in (0.2, 0.5, 0.8):
+            for label, lim in (('on', {}), ('off', NO_LIMITS)):
+                if path.stem == 'big300_0' and label == 'on':
+                    continue
+                r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=w, **lim),
+                         airspace=sc.airspace if sc.airspace else None)
+                out[f'{path.stem}@{w} {label}'] = [r.cost.J, bool(r.feasible), r.seed]
+    return out
+
+
+def quality_markdown(before: dict, after: dict, trees: tuple[str, str]) -> str:
+    """Render perturbation_quality.md: J of every bundled plan before and after."""
+    keys = [k for k in before if k in after]
+    ratio = {k: after[k][0] / before[k][0] for k in keys}
+    higher = [k for k in keys if ratio[k] > 1 + QUALITY_SLACK]
+    lower = [k for k in keys if ratio[k] < 1 - QUALITY_SLACK]
+    same = sum(after[k][0] == before[k][0] for k in keys)
+    lines = ['# Quality gate of issue 28: every bundled plan before and after', '',
+             f'Written by `python -m bench perturbation --quality` on '
+             f'{time.strftime("%Y-%m-%d")}: before = `{trees[0]}`, after = `{trees[1]}`. '
+             'Every `test/data/*.yaml` scenario at w 0.2 / 0.5 / 0.8, flight limits on (the '
+             'defaults) and off (`big300_0` off only), cold plans of `best`, each J the '
+             "checkout's own exact J of its own path.", '',
+             f'* plans: {len(keys)}; higher than before by more than {QUALITY_SLACK:g} '
+             f'relative: {len(higher)}' + (f' ({", ".join(higher)})' if higher else '')
+             + f'; lower: {len(lower)}; bit for bit the same J: {same}',
+             f'* largest rise {max(ratio.values()) - 1:.2e}, largest fall '
+             f'{1 - min(ratio.values()):.2e} relative', '',
+             '| case | limits | J before | J after | after / before | feasible | seed after |',
+             '|---|---|---:|---:|---:|---|---|']
+    for k in keys:
+        case, label = k.rsplit(' ', 1)
+        lines.append(f'| {case} | {label} | {before[k][0]:.6f} | {after[k][0]:.6f} | '
+                     f'{ratio[k]:.7f} | {before[k][1]} / {after[k][1]} | {after[k][2]} |')
+    return '\n'.join(lines) + '\n'
+
+
+def _quality(base: Path, out: Path) -> None:
+    """Plan the bundled scenarios with `base` and with this checkout; write the table."""
+    import subprocess
+    import tempfile
+    found = []
+    with tempfile.TemporaryDirectory() as work:
+        for i, tree in enumerate((base.resolve(), ROOT)):
+            path = Path(work) / f'{i}.json'
+            subprocess.run([sys.executable, '-m', 'bench', 'perturbation', '--tree', str(tree),
+                            '--bundled-json', str(path)], check=True, cwd=ROOT)
+            found.append(json.loads(path.read_text()))
+    out.write_text(quality_markdown(*found, (short_commit(base), short_commit(ROOT))))
+    print(f'wrote {out}')
+
+
 def main(argv: list[str] | None = None) -> None:
     """Run the cases and write the report (and the rows as JSON)."""
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', type=Path, default=OUT)
+    ap.add_argument('--out', type=Path, default=None,
+                    help=f'default {OUT} ({QUALITY_OUT} with --quality)')
     ap.add_argument('--json', type=Path, default=None, help='also write the rows here')
     ap.add_argument('--limits', nargs='+', choices=('on', 'off'), default=['on'])
     ap.add_argument('--tree', type=Path, default=None,
                     help="plan with this checkout's threat_planner")
+    ap.add_argument('--quality', type=Path, default=None, metavar='BASE',
+                    help='the quality gate instead: bundled plans of BASE and of this checkout')
+    ap.add_argument('--bundled-json', type=Path, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.quality is not None:
+        return _quality(args.quality, args.out or QUALITY_OUT)
     tree = (args.tree or ROOT).resolve()
     if args.tree is not None:
         sys.path.insert(0, str(tree))
+    if args.bundled_json is not None:
+        args.bundled_json.write_text(json.dumps(bundled_plans()))
+        return None
+    args.out = args.out or OUT
     rows = run(tuple(args.limits))
     args.out.write_text(markdown(rows, short_commit(tree)))
     if args.json is not None:
