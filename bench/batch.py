@@ -41,11 +41,13 @@ import tempfile
 import time
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+for _where in (ROOT, ROOT / 'test'):   # the package, and the tests' process-tree helper
+    if str(_where) not in sys.path:
+        sys.path.insert(0, str(_where))
 
 import numpy as np  # noqa: E402
 import pyarrow.parquet as pq  # noqa: E402
+from study_harness import descendants  # noqa: E402
 import yaml  # noqa: E402
 
 RESULTS = ROOT / 'bench' / 'results'
@@ -181,22 +183,6 @@ def chunk_overhead(study: Path, work: Path, plans: int = 64) -> dict:
             'overhead': (wall - plan_s + commit) / plan_s}
 
 
-def _descendants(pid: int) -> set[int]:
-    parents = {}
-    for entry in os.listdir('/proc'):
-        if entry.isdigit():
-            try:
-                stat = Path(f'/proc/{entry}/stat').read_text()
-            except OSError:
-                continue
-            parents[int(entry)] = int(stat.rsplit(')', 1)[1].split()[1])
-    out, frontier = set(), {pid}
-    while frontier:
-        frontier = {p for p, pp in parents.items() if pp in frontier} - out
-        out |= frontier
-    return out
-
-
 def kill_and_resume(work: Path, study: Path, reference: Path, wall: float, seed: int) -> dict:
     """Part 2: SIGKILL a run at a random moment, run it again, compare the tables."""
     out = work / 'killed'
@@ -212,7 +198,7 @@ def kill_and_resume(work: Path, study: Path, reference: Path, wall: float, seed:
     ended_early = run.poll() is not None
     at = random.Random(seed).uniform(first, max(first, 0.8 * wall))
     time.sleep(max(0.0, at - (time.perf_counter() - t0)))
-    workers = _descendants(run.pid)
+    workers = descendants(run.pid)
     run.send_signal(signal.SIGKILL)
     run.wait()
     killed_after = time.perf_counter() - t0

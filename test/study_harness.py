@@ -1,5 +1,6 @@
 """Small studies for the batch tests: scenario copies, a study file, and table comparisons."""
 
+import os
 from pathlib import Path
 import shutil
 import subprocess
@@ -33,3 +34,20 @@ def cli(*args, cwd=None, timeout=300):
     """Run ``threat-planner`` as a user does; the completed process."""
     return subprocess.run([sys.executable, '-m', 'threat_planner.cli', *map(str, args)],
                           capture_output=True, text=True, timeout=timeout, cwd=cwd)
+
+
+def descendants(pid: int) -> set[int]:
+    """Return the ids of every living process below `pid` (read from /proc)."""
+    parents = {}
+    for entry in os.listdir('/proc'):
+        if entry.isdigit():
+            try:
+                stat = Path(f'/proc/{entry}/stat').read_text()
+            except OSError:
+                continue
+            parents[int(entry)] = int(stat.rsplit(')', 1)[1].split()[1])
+    out, frontier = set(), {pid}
+    while frontier:
+        frontier = {p for p, pp in parents.items() if pp in frontier} - out
+        out |= frontier
+    return out

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from study_harness import rows, write_study
+from study_harness import descendants, rows, write_study
 
 from threat_planner import load_scenario, path_cost
 from threat_planner.batch.runner import run_batch
@@ -108,26 +108,10 @@ def test_ray_gives_the_same_table(study, local_table, ray_cluster, tmp_path):
     assert rows(pq.read_table(tmp_path / 'results.parquet')) == rows(local_table)
 
 
-def _descendants(pid: int) -> set[int]:
-    parents = {}
-    for entry in os.listdir('/proc'):
-        if entry.isdigit():
-            try:
-                stat = Path(f'/proc/{entry}/stat').read_text()
-            except OSError:
-                continue
-            parents[int(entry)] = int(stat.rsplit(')', 1)[1].split()[1])
-    out, frontier = set(), {pid}
-    while frontier:
-        frontier = {p for p, pp in parents.items() if pp in frontier} - out
-        out |= frontier
-    return out
-
-
 def _kill_a_running_chunk(found: list, stop: threading.Event) -> None:
     """SIGKILL the first of this test's Ray workers seen running a chunk."""
     while not stop.is_set():
-        for pid in _descendants(os.getpid()):
+        for pid in descendants(os.getpid()):
             try:
                 title = Path(f'/proc/{pid}/cmdline').read_bytes()
             except OSError:

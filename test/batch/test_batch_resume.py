@@ -1,6 +1,5 @@
 """Results survive: a run killed with SIGKILL, run again, gives the uninterrupted table."""
 
-import os
 from pathlib import Path
 import re
 import signal
@@ -10,7 +9,7 @@ import time
 
 import pyarrow.parquet as pq
 import pytest
-from study_harness import cli, ROOT, rows, write_study
+from study_harness import cli, descendants, ROOT, rows, write_study
 
 from threat_planner.batch.runner import run_batch
 from threat_planner.batch.store import Store
@@ -37,22 +36,6 @@ def whole(study, tmp_path_factory):
     return pq.read_table(out / 'results.parquet')
 
 
-def _descendants(pid: int) -> set[int]:
-    parents = {}
-    for entry in os.listdir('/proc'):
-        if entry.isdigit():
-            try:
-                stat = Path(f'/proc/{entry}/stat').read_text()
-            except OSError:
-                continue
-            parents[int(entry)] = int(stat.rsplit(')', 1)[1].split()[1])
-    out, frontier = set(), {pid}
-    while frontier:
-        frontier = {p for p, pp in parents.items() if pp in frontier} - out
-        out |= frontier
-    return out
-
-
 def test_killed_mid_run_then_resumed_equals_the_uninterrupted_table(study, whole, tmp_path):
     out = tmp_path / 'out'
     run = subprocess.Popen([sys.executable, '-m', 'threat_planner.cli', 'batch', str(study),
@@ -62,7 +45,7 @@ def test_killed_mid_run_then_resumed_equals_the_uninterrupted_table(study, whole
     while not list((out / 'parts').glob('*.parquet')) and time.monotonic() < deadline:
         assert run.poll() is None, run.stderr.read().decode()
         time.sleep(0.005)
-    workers = _descendants(run.pid)
+    workers = descendants(run.pid)
     run.send_signal(signal.SIGKILL)            # kill -9: no handler, no clean-up
     run.wait()
     run.stdout.close()
