@@ -91,6 +91,10 @@ class PlanService:
         self._current_state = current_state
         self._jobs: queue.Queue = queue.Queue(maxsize=QUEUE_BOUND)
         self._count = 0
+        # Done when the latest queued request has been answered: each answer waits for the
+        # one before it, since the executor resumes ready coroutines newest first.
+        self._answered: Future = Future()
+        self._answered.set_result(None)
         # Wakes the executor when an answer is ready, so the awaiting callback resumes.
         self._wake = node.create_guard_condition(lambda: None)
         # Reentrant: a mutually exclusive group stays held while a callback's coroutine
@@ -121,7 +125,12 @@ class PlanService:
                                             f'{reason}')
             response.plan = _empty_path(self._current_state().settings.frame_id, request)
             return response
+        previous, answered = self._answered, Future()
+        self._answered = answered
         response.plan = await answer
+        await previous
+        # The executor sends this response before it resumes the next coroutine.
+        answered.set_result(None)
         return response
 
     def _loop(self) -> None:
