@@ -44,7 +44,9 @@ REFERENCE_BOX = SHARED / 'reference_box.json'
 def _settings(args: argparse.Namespace, grid: int, radius: float) -> dict:
     return {'grid': grid, 'routes': 4, 'penalty': 3.0, 'coarse': 20, 'fine': 60,
             'n_segments': args.segments, 'spacing': args.spacing, 'max_climb_deg': args.climb,
-            'max_dive_deg': args.dive, 'min_turn_radius_m': radius}
+            'max_dive_deg': args.dive, 'min_turn_radius_m': radius,
+            # Cases cached under the circumradius rule (no key) are computed again.
+            'turn_radius': 'fillet'}
 
 
 def run_case(sc, w: float, graph, settings: dict) -> dict:

@@ -4,16 +4,16 @@ The definitions (the ones the product will adopt):
 
 * **climb / dive angle** of a segment = ``atan2(+-dz, horizontal length)``; the climb angle
   (dz > 0) must be <= ``max_climb_deg`` and the dive angle (dz < 0) <= ``max_dive_deg``.
-* **turn radius** at an interior vertex = radius of the circle through it and its two
-  neighbours in 3-D (collinear, including coincident, points: infinite); it must be
-  >= ``min_turn_radius_m``.
+* **turn radius** at an interior vertex = radius of the arc tangent to both of its
+  segments whose tangent points lie within the vertex's share of each (half a segment,
+  all of the first and last one): ``share / tan(theta / 2)`` with theta the turn angle in
+  3-D (straight on: infinite, straight back: 0); it must be >= ``min_turn_radius_m``.
 
-:func:`flight_limits` and :func:`check_limits` evaluate these directly (side lengths and
-triangle area, no optimiser code), so they are an independent check of what
-:class:`LimitConstraints` enforces inside the optimiser. Note that a circumradius cannot
-see a reversal: three almost collinear points with the middle one outside the other two
-have a huge circle, so the turn-radius rule alone does not forbid a spike; the limited
-yardstick keeps segments of nearly equal length, which rules such spikes out.
+:func:`flight_limits` and :func:`check_limits` evaluate these directly (the turn angle by
+``arctan2(|u x v|, u . v)``, no optimiser code), so they are an independent check of what
+:class:`LimitConstraints` enforces inside the optimiser. The radius of the circle through
+three points, the rule before, could not see a reversal beside a short segment; the
+fillet can (a hairpin has radius 0 whatever the segment lengths).
 """
 
 from __future__ import annotations
@@ -59,23 +59,23 @@ def segment_angles(points: ArrayLike) -> NDArray:
 
 
 def turn_radii(points: ArrayLike) -> NDArray:
-    """Radius of the circle through each interior vertex and its neighbours [m].
+    """Fillet radius at each interior vertex [m]: share / tan(theta / 2).
 
-    R = a b c / (4 K) with a, b, c the triangle's sides and K its area; collinear or
-    coincident points give ``inf``.
+    theta = arctan2(|a x b|, a . b) for the segments a, b meeting there; the share is half
+    of each segment, all of the first and last. Coincident points give ``inf``.
     """
     p = np.asarray(points, float)
-    u = p[:-2] - p[1:-1]
-    v = p[2:] - p[1:-1]
-    a = np.linalg.norm(u, axis=1)
-    b = np.linalg.norm(v, axis=1)
-    c = np.linalg.norm(p[2:] - p[:-2], axis=1)
-    twice_area = np.linalg.norm(np.cross(u, v), axis=1)
-    # Area below rounding of the sides' product means the three points are collinear.
-    flat = twice_area <= 1e-14 * np.maximum(a * b, 1e-300)
+    d = np.diff(p, axis=0)
+    seg = np.linalg.norm(d, axis=1)
+    share = seg / 2.0
+    share[0], share[-1] = seg[0], seg[-1]
+    a, b = d[:-1], d[1:]
+    theta = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.sum(a * b, axis=1))
     with np.errstate(divide='ignore', invalid='ignore'):
-        r = np.where(flat, np.inf, a * b * c / (2.0 * twice_area))
-    return r
+        r = np.minimum(share[:-1], share[1:]) / np.tan(theta / 2.0)
+    # tan(pi / 2) is finite in floating point: a hairpin is exactly 0.
+    r = np.where(theta >= math.pi * (1 - 1e-15), 0.0, r)
+    return np.where((seg[:-1] == 0) | (seg[1:] == 0), np.inf, r)
 
 
 def flight_limits(points: ArrayLike) -> dict[str, float]:
@@ -125,8 +125,9 @@ class LimitConstraints:
     Notes
     -----
     Climb: ``tan(max_climb) h - dz >= 0``, dive: ``tan(max_dive) h + dz >= 0`` with h the
-    horizontal length; turn: ``1 - (R_min / R)^2 >= 0`` with ``R = |u - v| / (2 sin t)``
-    (law of sines; u, v the vertex's two sides, t the angle between them). The Jacobian is
+    horizontal length; turn: two rows a vertex, ``cos(theta) - (1 - t^2) / (1 + t^2) >= 0``
+    with t = share / R_min for the share of the segment before and after it (this is
+    tan(theta / 2) <= t, the fillet fitting). The Jacobian is
     by complex step: each g depends on at most three consecutive vertices, so nine complex
     evaluations (vertices taken three apart, one coordinate at a time) give it exactly.
     """
@@ -156,15 +157,16 @@ class LimitConstraints:
         parts = [(self.tan_climb * h - d[:, 2]) / s, (self.tan_dive * h + d[:, 2]) / s,
                  (length - s / self.spacing) / s, (s * self.spacing - length) / s]
         if len(p) > 2 and self.r_min > 0:
-            u = p[:-2] - p[1:-1]
-            v = p[2:] - p[1:-1]
-            cr = np.cross(u, v)
-            uu, vv = np.sum(u * u, axis=1), np.sum(v * v, axis=1)
-            ww = np.sum((u - v) ** 2, axis=1)
-            # (R_min / R)^2 = 4 R_min^2 sin^2 t / |u - v|^2, sin^2 t = |u x v|^2 / (uu vv)
+            a, b = d[:-1], d[1:]
             # A tiny floor keeps coincident vertices (met in line searches) from giving NaN.
-            den = uu * vv * ww + (1e-12 * s) ** 6
-            parts.append(1.0 - 4.0 * self.r_min ** 2 * np.sum(cr * cr, axis=1) / den)
+            la = np.sqrt(np.sum(a * a, axis=1) + (1e-12 * s) ** 2)
+            lb = np.sqrt(np.sum(b * b, axis=1) + (1e-12 * s) ** 2)
+            cos = np.sum(a * b, axis=1) / (la * lb)
+            alpha = np.full(len(d), 0.5)
+            alpha[0] = alpha[-1] = 1.0
+            for share in (alpha[:-1] * la, alpha[1:] * lb):
+                t2 = (share / self.r_min) ** 2
+                parts.append(cos - (1.0 - t2) / (1.0 + t2))
         return np.concatenate(parts)
 
     def __call__(self, z: NDArray) -> NDArray:
@@ -182,7 +184,7 @@ class LimitConstraints:
         deps = [seg_dep] * 4
         if m >= 1 and self.r_min > 0:
             v = np.arange(1, m + 1)
-            deps.append(np.stack([v - 1, v, v + 1], axis=1))
+            deps += [np.stack([v - 1, v, v + 1], axis=1)] * 2
         deps = np.vstack(deps)
         interior = (deps >= 1) & (deps <= m)
         jac = np.zeros((len(deps), len(z)))

@@ -80,7 +80,13 @@ def test_turn_radius_of_sampled_circle():
     e1 = np.array([1.0, 1.0, 0.0]) / math.sqrt(2)
     e2 = np.array([-1.0, 1.0, 2.0]) / math.sqrt(6)
     pts = 3.0 + 7.0 * (np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2)
-    np.testing.assert_allclose(fl.turn_radii(pts), 7.0, rtol=1e-9)
+    # From the arcs alone: chords 2 R sin(dt / 2), the turn at a vertex the mean of the
+    # arcs beside it, each chord's share half of it (all of an end chord).
+    dt = np.diff(t)
+    share = 7.0 * np.sin(dt / 2)
+    share[[0, -1]] *= 2.0
+    expected = np.minimum(share[:-1], share[1:]) / np.tan((dt[:-1] + dt[1:]) / 4)
+    np.testing.assert_allclose(fl.turn_radii(pts), expected, rtol=1e-9)
     line = np.outer(np.linspace(0.0, 1.0, 5), [1.0, 2.0, 3.0])
     assert np.all(np.isinf(fl.turn_radii(line)))
 
@@ -98,11 +104,12 @@ def test_climb_and_dive_angles():
 
 
 def test_check_limits_turn_radius():
-    # Quarter circle of radius 10 in 6 equal steps: every circumradius is 10.
+    # Quarter circle of radius 10 in 6 equal steps of 15 deg: every fillet is 10 cos 7.5 deg.
     t = np.linspace(0.0, math.pi / 2, 7)
     pts = np.stack([10 * np.cos(t), 10 * np.sin(t), np.zeros(7)], axis=1)
-    assert fl.check_limits(pts, fl.Limits(1.0, 1.0, 10.0))
-    assert not fl.check_limits(pts, fl.Limits(1.0, 1.0, 10.01))
+    r = 10 * math.cos(math.radians(7.5))
+    assert fl.check_limits(pts, fl.Limits(1.0, 1.0, r))
+    assert not fl.check_limits(pts, fl.Limits(1.0, 1.0, r * 1.0001))
 
 
 @settings(max_examples=30, deadline=None)

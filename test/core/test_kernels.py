@@ -184,12 +184,14 @@ def test_lbfgs_reaches_scipy_lbfgsb_within_bounds(precondition):
 def test_multipliers_carry_to_a_finer_path_as_densities():
     limits = FlightLimits(30.0, 25.0, 10.0)
     coarse, fine = LimitTerm(limits, 11), LimitTerm(limits, 21)
-    lam = np.concatenate([np.full(10, 0.4), np.linspace(0, 1, 10), np.full(9, 0.2)])
+    lam = np.concatenate([np.full(10, 0.4), np.linspace(0, 1, 10), np.full(9, 0.2),
+                          np.full(9, 0.3)])
     out = fine.transfer((coarse, lam))
     assert out.shape == (fine.rows,)
     np.testing.assert_allclose(out[:20], 0.2)                 # climb: half per segment
     assert out[20] == pytest.approx(0.0) and out[39] == pytest.approx(0.5)
-    np.testing.assert_allclose(out[40:], 0.1)                 # radius rows
+    np.testing.assert_allclose(out[40:59], 0.1)               # radius rows, each side
+    np.testing.assert_allclose(out[59:], 0.15)
     # The total (the integral of the density) is kept.
     assert out[:20].sum() == pytest.approx(lam[:10].sum())
 

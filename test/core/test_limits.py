@@ -17,15 +17,27 @@ ALL_ON = FlightLimits(20.0, 30.0, 15.0, 0.0)
 @given(st.floats(0.5, 500.0), st.floats(1.0, 170.0), st.integers(3, 40),
        st.floats(-math.pi, math.pi), st.floats(-1.4, 1.4))
 @settings(max_examples=60, deadline=None)
-def test_turn_radius_of_points_on_a_circle_is_its_radius(radius, arc_deg, n, yaw, tilt):
-    """Any three consecutive points on a circle of radius R, in any plane, give R."""
+def test_turn_radius_of_points_on_a_circle(radius, arc_deg, n, yaw, tilt):
+    """Points dphi apart on a circle of radius R, in any plane, give R cos(dphi / 2) (twice
+    that for three points: both segments are end ones, each the corner's in full)."""
     phi = np.radians(np.linspace(0.0, arc_deg, n))
     local = np.stack([radius * np.cos(phi), radius * np.sin(phi), np.zeros(n)], axis=1)
     cy, sy, ct, st_ = math.cos(yaw), math.sin(yaw), math.cos(tilt), math.sin(tilt)
     rot = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]]) @ np.array(
         [[1, 0, 0], [0, ct, -st_], [0, st_, ct]])
     pts = local @ rot.T + np.array([3.0, -7.0, 11.0])
-    np.testing.assert_allclose(turn_radii(pts), radius, rtol=1e-7)
+    dphi = math.radians(arc_deg) / (n - 1)
+    whole = 2.0 if n == 3 else 1.0
+    np.testing.assert_allclose(turn_radii(pts), whole * radius * math.cos(dphi / 2),
+                               rtol=1e-7)
+
+
+def test_turn_radius_of_a_sampled_circle_tends_to_its_radius():
+    radii = []
+    for n in (5, 17, 65, 257):
+        phi = np.linspace(0.0, math.pi / 2, n)
+        radii.append(turn_radii(np.stack([10 * np.cos(phi), 10 * np.sin(phi), 0 * phi], 1))[0])
+    assert np.all(np.diff(radii) > 0) and 10.0 - radii[-1] < 1e-4
 
 
 def test_turn_radius_straight_is_infinite_and_hairpin_zero():
@@ -33,15 +45,51 @@ def test_turn_radius_straight_is_infinite_and_hairpin_zero():
     assert np.all(np.isinf(turn_radii(line)))
     back = np.array([[0, 0, 0], [2, 0, 0], [1, 0, 0.0]])
     assert turn_radii(back)[0] == 0.0
-    # A repeated vertex is skipped: the circle goes through the distinct neighbours.
+    # A repeated vertex is skipped: the fillet is between the distinct neighbours' legs.
     rep = np.array([[1, 0, 0], [0, 1, 0], [0, 1, 0], [-1, 0, 0.0]])
-    np.testing.assert_allclose(turn_radii(rep), [1.0])
+    np.testing.assert_allclose(turn_radii(rep), [math.sqrt(2)])
 
 
-def test_turn_radius_of_right_angle_corner():
-    """Legs of length L at 90 deg: the circle through the three points has R = L / sqrt 2."""
+def test_turn_radius_of_right_angle_corners():
+    """A 90 deg corner: share / tan(45 deg), the share all of an end leg, half of another."""
     pts = np.array([[0, 0, 0], [4, 0, 0], [4, 4, 0.0]])
-    np.testing.assert_allclose(turn_radii(pts), [4 / math.sqrt(2)])
+    np.testing.assert_allclose(turn_radii(pts), [4.0])
+    pts = np.array([[0, 0, 0], [4, 0, 0], [4, 4, 0.0], [8, 4, 0.0]])
+    np.testing.assert_allclose(turn_radii(pts), [2.0, 2.0])
+
+
+def test_a_sharp_turn_beside_a_short_segment_is_a_tight_radius():
+    """154 deg after a 0.95 m segment (a plan on uniform20_1 had one): the circle through
+    the three points is 10.0 m, the fillet that fits is 0.22 m."""
+    turn = math.radians(154.3)
+    pts = np.array([[0, 0, 0], [0.95, 0, 0],
+                    [0.95 + 9.53 * math.cos(turn), 9.53 * math.sin(turn), 0.0],
+                    [-20.0, 9.53 * math.sin(turn), 0.0]])
+    a, b = pts[1] - pts[0], pts[2] - pts[1]
+    circle = (np.linalg.norm(a) * np.linalg.norm(b) * np.linalg.norm(a + b)
+              / (2 * np.linalg.norm(np.cross(a, b))))
+    assert circle > 9.9
+    np.testing.assert_allclose(turn_radii(pts)[0], 0.95 / math.tan(turn / 2))
+    assert not check_limits(pts, FlightLimits(90.0, 90.0, 10.0), 0.0).feasible
+
+
+@given(st.integers(0, 10_000), st.integers(2, 12))
+@settings(max_examples=60, deadline=None)
+def test_arcs_of_the_least_radius_fit_the_segments(seed, n):
+    """With R the path's least radius, the arcs of radius R at every corner (tangent length
+    R tan(theta / 2)) fit: two on a segment never overlap, one stays on an end segment."""
+    pts = _random_path(seed, n)
+    r = float(turn_radii(pts).min())
+    d = np.diff(pts, axis=0)
+    seg = np.linalg.norm(d, axis=1)
+    theta = np.arctan2(np.linalg.norm(np.cross(d[:-1], d[1:]), axis=1),
+                       np.einsum('ik,ik->i', d[:-1], d[1:]))
+    tangent = np.concatenate([[0.0], r * np.tan(theta / 2), [0.0]])
+    assert np.all(tangent[:-1] + tangent[1:] <= seg * (1 + 1e-9))
+    # At the tightest corner the arc uses all of a share: half a segment, or an end one.
+    k = int(np.argmin(turn_radii(pts)))
+    share = np.where((np.arange(n) == 0) | (np.arange(n) == n - 1), seg, seg / 2)
+    assert tangent[k + 1] == pytest.approx(min(share[k], share[k + 1]), rel=1e-9)
 
 
 @pytest.mark.parametrize('dz, horizontal, expected', [
@@ -111,7 +159,8 @@ def test_constraints_agree_with_the_metrics(seed, n):
     np.testing.assert_array_equal(g[:n] >= 0, ang <= 20.0 + 1e-9)
     np.testing.assert_array_equal(g[n:2 * n] >= 0, -ang <= 30.0 + 1e-9)
     close = np.abs(rad - 15.0) < 1e-9
-    np.testing.assert_array_equal((g[2 * n:] >= 0)[~close], (rad >= 15.0)[~close])
+    both_sides = (g[2 * n:].reshape(2, n - 1) >= 0).all(axis=0)
+    np.testing.assert_array_equal(both_sides[~close], (rad >= 15.0)[~close])
 
 
 @given(st.integers(0, 10_000), st.integers(2, 30), st.floats(0.1, 100.0))

@@ -101,7 +101,8 @@ def test_the_constrained_answer_is_the_least_j_feasible_round(problem):
     _, _, best = level.constrained(x0, None, opt.PENALTY_START, 200)
     done = level.trace[~np.isnan(level.trace[:, 0])]
     feasible = done[done[:, 1] == 1.0, 0]
-    assert len(feasible) >= 3
+    # Two feasible rounds here, the second 1e-4 higher: the first is the one returned.
+    assert len(feasible) >= 2
     assert check_limits(best, limits, 0.0).feasible
     assert level.value(best, 0.0) == feasible.min()
     # With a gain any feasible round lowers J by less than (100 %), the second one stops.

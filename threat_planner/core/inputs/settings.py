@@ -199,7 +199,8 @@ SETTINGS: tuple[Setting, ...] = (
             "Steepest dive of any segment, atan2(-dz, horizontal) ('best'; 90 = off)",
             unit='deg', lo=0.0, hi=90.0, lo_open=True, cli='max-dive'),
     Setting('min_turn_radius_m', float, 10.0,
-            "Smallest radius of the circle through 3 consecutive path points ('best'; 0 = off)",
+            "Smallest fillet at a corner: arc tangent to both segments within half of each "
+            "('best'; 0 = off)",
             unit='m', lo=0.0, hi=1.0e6, cli='min-turn-radius'),
     Setting('min_altitude_m', float, 0.0,
             "Lowest height of the path above the box floor, start and goal exempt ('best'; "

@@ -1,7 +1,7 @@
 """Compiled (numba) flight-limit term of the augmented Lagrangian.
 
 The same constraints as :func:`threat_planner.core.optimise.limits.constraint_values` (climb, dive,
-curvature form of the turn radius, in that row order), fused with the Powell-Hestenes-
+fillet form of the turn radius, in that row order), fused with the Powell-Hestenes-
 Rockafellar term so that one call gives the penalty's value and gradient. The numpy
 version costs ~0.8 ms per evaluation at 40 segments (measured in
 ``bench/results/profile_before.txt``), more than J itself; this one costs microseconds.
@@ -19,8 +19,29 @@ from threat_planner.core.cost.kernels import njit
 __all__ = ['LimitTerm', 'measure']
 
 _TINY = 1e-300
+#: Floor of a segment length in a turn's terms: its square and products stay above zero.
+_SHORT = 1e-150
 #: Segments shorter than this fraction of the longest (or of 1 m) count as zero length.
 DEGENERATE = 1e-12
+
+
+@njit(cache=True)
+def _fillet(a, b, share):
+    """Radius [m] of the arc tangent to segments a, b whose tangent points lie within
+    ``share`` of the vertex: share / tan(theta / 2), theta the turn between them."""
+    la = math.sqrt(a @ a)
+    lb = math.sqrt(b @ b)
+    cx = a[1] * b[2] - a[2] * b[1]
+    cy = a[2] * b[0] - a[0] * b[2]
+    cz = a[0] * b[1] - a[1] * b[0]
+    cross = math.sqrt(cx * cx + cy * cy + cz * cz)
+    # tan(theta / 2) = |a x b| / (|a| |b| + a . b): straight on 0, straight back inf.
+    along = la * lb + a @ b
+    if cross <= 1e-15 * la * lb:
+        return math.inf if a @ b >= 0 else 0.0
+    if along <= 0.0:
+        return 0.0
+    return share * along / cross
 
 
 @njit(cache=True)
@@ -38,8 +59,8 @@ def _measure(points, floor_z):
         climb = max(climb, ang)
         dive = max(dive, -ang)
         longest = max(longest, math.sqrt(dx * dx + dy * dy + dz * dz))
-    # The circle through each kept vertex and its kept neighbours: a vertex at the end of
-    # a zero-length segment is skipped over.
+    # The fillet at each kept vertex, a vertex at the end of a zero-length segment skipped
+    # over: the first and last kept segments are the start's and goal's in full.
     keep = np.empty(n + 1, np.int64)
     m = 1
     keep[0] = 0
@@ -52,20 +73,9 @@ def _measure(points, floor_z):
     for k in range(1, m - 1):
         a = points[keep[k]] - points[keep[k - 1]]
         b = points[keep[k + 1]] - points[keep[k]]
-        c = a + b
-        la = math.sqrt(a @ a)
-        lb = math.sqrt(b @ b)
-        lc = math.sqrt(c @ c)
-        cx = a[1] * b[2] - a[2] * b[1]
-        cy = a[2] * b[0] - a[0] * b[2]
-        cz = a[0] * b[1] - a[1] * b[0]
-        cross = math.sqrt(cx * cx + cy * cy + cz * cz)
-        if cross <= 1e-15 * la * lb:
-            # Exactly collinear: straight on is no turn, straight back a hairpin.
-            r = math.inf if a @ b >= 0 else 0.0
-        else:
-            r = la * lb * lc / (2.0 * cross)
-        radius = min(radius, r)
+        share = min(math.sqrt(a @ a) * (1.0 if k == 1 else 0.5),
+                    math.sqrt(b @ b) * (1.0 if k == m - 2 else 0.5))
+        radius = min(radius, _fillet(a, b, share))
     alt = math.inf
     for i in range(1, n):
         alt = min(alt, points[i, 2] - floor_z)
@@ -78,6 +88,20 @@ def measure(points: NDArray, floor_z: float) -> tuple[float, float, float, float
     The definitions of :mod:`.limits` (its module docstring), compiled.
     """
     return _measure(np.ascontiguousarray(points, float), float(floor_z))
+
+
+@njit(cache=True)
+def _cos_turn(points, i):
+    """cos of the turn at vertex i and the lengths of the segments before and after it."""
+    ax = points[i, 0] - points[i - 1, 0]
+    ay = points[i, 1] - points[i - 1, 1]
+    az = points[i, 2] - points[i - 1, 2]
+    bx = points[i + 1, 0] - points[i, 0]
+    by = points[i + 1, 1] - points[i, 1]
+    bz = points[i + 1, 2] - points[i, 2]
+    la = max(math.sqrt(ax * ax + ay * ay + az * az), _SHORT)
+    lb = max(math.sqrt(bx * bx + by * by + bz * bz), _SHORT)
+    return (ax * bx + ay * by + az * bz) / (la * lb), la, lb
 
 
 @njit(cache=True)
@@ -101,21 +125,18 @@ def _values(points, sin_c, sin_d, r_min, on_c, on_d, on_r, out):
             out[row] = (h * sn + sign * dz * cs) / (ln if ln > 0 else 1.0)
             row += 1
     if on_r:
-        for i in range(1, n):
-            ax = points[i, 0] - points[i - 1, 0]
-            ay = points[i, 1] - points[i - 1, 1]
-            az = points[i, 2] - points[i - 1, 2]
-            bx = points[i + 1, 0] - points[i, 0]
-            by = points[i + 1, 1] - points[i, 1]
-            bz = points[i + 1, 2] - points[i, 2]
-            aa = ax * ax + ay * ay + az * az
-            bb = bx * bx + by * by + bz * bz
-            ab = ax * bx + ay * by + az * bz
-            cc = aa + bb + 2.0 * ab
-            den = max(aa * bb * cc, _TINY)
-            rho = max(aa * bb - ab * ab, 0.0) / den
-            out[row] = 1.0 - 2.0 * r_min * math.sqrt(rho + _TINY)
-            row += 1
+        # Two rows a vertex, cos(theta) - (1 - t^2) / (1 + t^2) with t = share / R_min for
+        # the segment before it (first block) and the one after it (second block): >= 0
+        # exactly where the fillet fits that share (tan(theta / 2) <= t). Smooth wherever
+        # the segments have length, bounded in [-2, 2], and a hairpin is -2, not 0.
+        for side in range(2):
+            for i in range(1, n):
+                seg = i - 1 if side == 0 else i
+                cos, la, lb = _cos_turn(points, i)
+                share = (la if side == 0 else lb) * (1.0 if seg == 0 or seg == n - 1 else 0.5)
+                t = share / r_min
+                out[row] = cos - (1.0 - t * t) / (1.0 + t * t)
+                row += 1
     return row
 
 
@@ -171,30 +192,31 @@ def _penalty(points, sin_c, sin_d, r_min, on_c, on_d, on_r, lam, mu, g, grad):
             grad[s_, 1] += s * fy
             grad[s_, 2] += s * fz
     if on_r:
-        for i in range(1, n):
-            s = g[row]
-            row += 1
-            if s == 0.0:
-                continue
-            a = points[i] - points[i - 1]
-            b = points[i + 1] - points[i]
-            c = a + b
-            aa = a @ a
-            bb = b @ b
-            cc = c @ c
-            ab = a @ b
-            den = max(aa * bb * cc, _TINY)
-            rho = max(aa * bb - ab * ab, 0.0) / den
-            k4 = r_min / math.sqrt(rho + _TINY)
-            drho_a = (2.0 * (a * bb - b * ab) / den
-                      - rho * (2.0 * a / max(aa, _TINY) + 2.0 * c / max(cc, _TINY)))
-            drho_b = (2.0 * (b * aa - a * ab) / den
-                      - rho * (2.0 * b / max(bb, _TINY) + 2.0 * c / max(cc, _TINY)))
-            # dg/dx = -k4 drho/dx; the term's gradient is -s dg/dx = s k4 drho/dx.
-            f = s * k4
-            grad[i - 1] -= f * drho_a
-            grad[i] += f * (drho_a - drho_b)
-            grad[i + 1] += f * drho_b
+        for side in range(2):
+            for i in range(1, n):
+                s = g[row]
+                row += 1
+                if s == 0.0:
+                    continue
+                a = points[i] - points[i - 1]
+                b = points[i + 1] - points[i]
+                cos, la, lb = _cos_turn(points, i)
+                # d cos / da = b / (|a| |b|) - cos a / |a|^2, likewise for b.
+                da = b / (la * lb) - cos * a / (la * la)
+                db = a / (la * lb) - cos * b / (lb * lb)
+                seg = i - 1 if side == 0 else i
+                alpha = 1.0 if seg == 0 or seg == n - 1 else 0.5
+                t = alpha * (la if side == 0 else lb) / r_min
+                # g = cos - q(t), dq/dt = -4 t / (1 + t^2)^2, dt / d(its segment) = alpha u / R.
+                dg_dlen = 4.0 * t / ((1.0 + t * t) ** 2) * alpha / r_min
+                if side == 0:
+                    da = da + dg_dlen * a / la
+                else:
+                    db = db + dg_dlen * b / lb
+                # The term's gradient is -s dg/dx; a = x_i - x_(i-1), b = x_(i+1) - x_i.
+                grad[i - 1] += s * da
+                grad[i] -= s * (da - db)
+                grad[i + 1] -= s * db
     return val / (2.0 * mu), m
 
 
@@ -217,7 +239,7 @@ class LimitTerm:
                      limits.radius_on and vertices >= 3)
         self.vertices = vertices
         n = vertices - 1
-        radius_rows = max(n - 1, 0) if self.args[5] else 0
+        radius_rows = 2 * max(n - 1, 0) if self.args[5] else 0
         self.rows = (limits.climb_on + limits.dive_on) * n + radius_rows
         self._g = np.zeros(self.rows)
         self._grad = np.zeros((vertices, 3))
@@ -235,8 +257,9 @@ class LimitTerm:
         seg_c, seg_f = (np.arange(nc) + 0.5) / nc, (np.arange(nf) + 0.5) / nf
         ver_c, ver_f = np.arange(1, nc) / nc, np.arange(1, nf) / nf
         rc = rf = 0
-        for on, (uc, uf) in zip(self.args[3:], ((seg_c, seg_f), (seg_c, seg_f),
-                                                (ver_c, ver_f))):
+        # Rows: climb (segments), dive (segments), radius (vertices, twice: two blocks).
+        blocks = ((seg_c, seg_f), (seg_c, seg_f), (ver_c, ver_f), (ver_c, ver_f))
+        for on, (uc, uf) in zip((*self.args[3:], self.args[5]), blocks):
             if not on:
                 continue
             if len(uf) and len(uc):

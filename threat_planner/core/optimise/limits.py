@@ -3,22 +3,27 @@
 Definitions (the ones ``--json`` reports and the tests check):
 
 * climb (dive) angle of a segment d = atan2(+dz, h) (atan2(-dz, h)), h = hypot(dx, dy);
-* turn radius at an interior vertex = radius of the circle through it and its two
-  neighbours, |a| |b| |a + b| / (2 |a x b|) for the segments a, b meeting there (3-D);
-  collinear points going on = infinite, a collinear reversal (hairpin) = 0, and a vertex
-  on its neighbour (zero-length segment) is skipped;
+* turn radius at an interior vertex = radius of the largest arc tangent to both segments
+  whose tangent points lie on the vertex's share of them: share / tan(theta / 2), theta
+  the turn between the segments (3-D), the share half of each segment, all of the first
+  and last (the start and goal do not turn); straight on = infinite, a hairpin = 0, and
+  a vertex on its neighbour (zero-length segment) is skipped;
 * altitude of every vertex but the start and goal (take-off and landing) above the floor.
 
-A curve of curvature radius R sampled at any spacing gives circles of radius R through
-consecutive samples, so the limits mean the same at any ``n_points``; the paper's per-vertex
-pitch and turn angles (:func:`~threat_planner.core.optimise.smoothing.check_angles`, methods
-``paper`` and ``improved``) do not: a 60 deg turn per vertex is a radius of ~2.5 m at 40
-segments over a 100 m field and ~1.3 m at 80.
+A path whose every radius is at least R flies as its segments joined by arcs of radius R,
+each arc on its own share of the segments, none overlapping the next. A circle of radius
+R sampled at spacing s gives R cos(phi / 2), phi = 2 asin(s / 2 R): R as s shrinks, 3 %
+less at s = R / 2. The radius of the circle through three points, the rule before, passes
+a 154 deg turn at a 1 m segment beside a 9.5 m one (10.0 m), which no aircraft flies.
+The paper's per-vertex angles (``check_angles`` in :mod:`.smoothing`, methods ``paper``
+and ``improved``) mean different things at different ``n_points``: 60 deg per vertex is a
+radius of ~2.5 m at 40 segments over a 100 m field and ~1.3 m at 80.
 
 The optimiser sees the limits as smooth constraints g >= 0 (dimensionless, O(1)):
-climb ``sin(c - angle)``, dive ``sin(v + angle)``, radius ``1 - R_min / R`` written
-as ``1 - 2 R_min sqrt(|a x b|^2 / (|a|^2 |b|^2 |a + b|^2))`` (curvature, no division by a
-vanishing cross product); the minimum altitude is a bound.
+climb ``sin(c - angle)``, dive ``sin(v + angle)``, and for the radius two rows a vertex,
+one for each segment's share: ``cos(theta) - (1 - t^2) / (1 + t^2)``, t = share / R_min,
+which is >= 0 exactly where tan(theta / 2) <= t (in [-2, 2], a hairpin -2); the minimum
+altitude is a bound.
 """
 
 from __future__ import annotations
@@ -49,7 +54,7 @@ class FlightLimits:
     max_dive_deg : float
         Largest flight-path angle downwards [deg]; 90 = off.
     min_turn_radius_m : float
-        Smallest radius of the circle through three consecutive points [m]; 0 = off.
+        Smallest fillet radius at any interior vertex (module docstring) [m]; 0 = off.
     min_altitude_m : float
         Lowest height of the interior vertices above the box floor [m]; 0 = off.
 
@@ -151,10 +156,11 @@ def climb_angles(points: NDArray) -> NDArray:
 
 
 def turn_radii(points: NDArray) -> NDArray:
-    """Radius of the circle through each interior vertex and its neighbours [m], (n-1,).
+    """Fillet radius at each interior vertex [m], (n-1,): share / tan(theta / 2).
 
-    Collinear points going on give inf, a collinear reversal 0; zero-length segments are
-    skipped over (the circle is taken through the nearest distinct points).
+    The share is half of each segment beside the vertex, all of the first and last one
+    (the module docstring). Straight on gives inf, straight back 0; zero-length segments
+    are skipped over (the fillet is taken between the nearest distinct points).
     """
     p = np.asarray(points, float)
     d = np.diff(p, axis=0)
@@ -163,15 +169,20 @@ def turn_radii(points: NDArray) -> NDArray:
     p = p[keep]
     if len(p) < 3:
         return np.zeros(0)
-    a, b = p[1:-1] - p[:-2], p[2:] - p[1:-1]
-    la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, a + b))
+    seg = np.diff(p, axis=0)
+    length = np.linalg.norm(seg, axis=1)
+    share = 0.5 * length
+    share[[0, -1]] = length[[0, -1]]
+    a, b = seg[:-1], seg[1:]
+    la, lb = length[:-1], length[1:]
     cross = np.linalg.norm(np.cross(a, b), axis=1)
+    along = la * lb + np.einsum('ik,ik->i', a, b)
     with np.errstate(divide='ignore', invalid='ignore'):
-        r = la * lb * lc / (2.0 * cross)
+        r = np.minimum(share[:-1], share[1:]) * along / cross
     # Exactly collinear: straight on is no turn at all, straight back is a hairpin.
     flat = cross <= 1e-15 * la * lb
-    dots = np.einsum('ik,ik->i', a, b)
-    return np.where(flat, np.where(dots >= 0, np.inf, 0.0), r)
+    r = np.where(along <= 0.0, 0.0, r)
+    return np.where(flat, np.where(along > la * lb, np.inf, 0.0), r)
 
 
 def check_limits(points: NDArray, limits: FlightLimits, floor_z: float) -> LimitCheck:
@@ -259,31 +270,26 @@ def _blocks(points: NDArray, limits: FlightLimits
         blocks.append((np.arange(row, row + n), seg_vertices, np.stack([-dg, dg], axis=1)))
         row += n
     if limits.radius_on and n >= 2:
+        # Two rows a vertex (module docstring): the share of the segment before it, then of
+        # the one after it; a = x_i - x_(i-1), b = x_(i+1) - x_i.
         a, b = d[:-1], d[1:]
-        c = a + b
-        aa, bb, cc = (np.einsum('ik,ik->i', v, v) for v in (a, b, c))
-        ab = np.einsum('ik,ik->i', a, b)
-        den = np.maximum(aa * bb * cc, 1e-300)
-        x = np.maximum(aa * bb - ab * ab, 0.0)
-        rho = x / den
-        # g = 1 - R_min / R = 1 - 2 R_min sqrt(rho): linear in the curvature, so a sharp
-        # corner is a violation of a few units, not of hundreds. Its kink at collinear
-        # points lies where g = 1, far from active, where the penalty is zero anyway.
-        root = np.sqrt(rho + 1e-300)
-        values.append(1.0 - 2.0 * limits.min_turn_radius_m * root)
-        k4 = limits.min_turn_radius_m / root
-        # rho = X / (A B C); X = |a|^2 |b|^2 - (a.b)^2, c = a + b.
-        dx_a = 2.0 * (a * bb[:, None] - b * ab[:, None])
-        dx_b = 2.0 * (b * aa[:, None] - a * ab[:, None])
-        drho_a = dx_a / den[:, None] - rho[:, None] * (2 * a / np.maximum(aa, 1e-300)[:, None]
-                                                       + 2 * c / np.maximum(cc, 1e-300)[:, None])
-        drho_b = dx_b / den[:, None] - rho[:, None] * (2 * b / np.maximum(bb, 1e-300)[:, None]
-                                                       + 2 * c / np.maximum(cc, 1e-300)[:, None])
-        # a = x1 - x0, b = x2 - x1
-        deriv = -k4[:, None, None] * np.stack([-drho_a, drho_a - drho_b, drho_b], axis=1)
+        la, lb = np.maximum(ln[:-1], 1e-150), np.maximum(ln[1:], 1e-150)
+        cos = np.einsum('ik,ik->i', a, b) / (la * lb)
+        dcos_a = b / (la * lb)[:, None] - (cos / la ** 2)[:, None] * a
+        dcos_b = a / (la * lb)[:, None] - (cos / lb ** 2)[:, None] * b
+        alpha = np.full(n, 0.5)
+        alpha[[0, -1]] = 1.0
         verts = np.stack([np.arange(n - 1), np.arange(1, n), np.arange(2, n + 1)], axis=1)
-        blocks.append((np.arange(row, row + n - 1), verts, deriv))
-        row += n - 1
+        r_min = limits.min_turn_radius_m
+        for side, (seg_len, seg_alpha) in enumerate(((la, alpha[:-1]), (lb, alpha[1:]))):
+            t = seg_alpha * seg_len / r_min
+            values.append(cos - (1.0 - t * t) / (1.0 + t * t))
+            grow = (4.0 * t / (1.0 + t * t) ** 2 * seg_alpha / r_min)[:, None]
+            da = dcos_a + (grow * a / la[:, None] if side == 0 else 0.0)
+            db = dcos_b + (grow * b / lb[:, None] if side == 1 else 0.0)
+            blocks.append((np.arange(row, row + n - 1), verts,
+                           np.stack([-da, da - db, db], axis=1)))
+            row += n - 1
     g = np.concatenate(values) if values else np.zeros(0)
     return g, blocks
 
