@@ -36,6 +36,12 @@ RUNNER_UP_MARGIN = 0.01
 #: within 0.04 % either way).
 SLOPE_SCREEN_ITERATIONS = 40
 SLOPE_SCREEN_ROUNDS = 3
+#: Largest breach of a slope (or altitude) limit [deg] ([m]) that a screened seed may end
+#: with and still rank by its J: the refinement meets the limits exactly. Three rounds end
+#: a few tenths of a degree over the limit or under it as rounding has it (uniform20_1 at w
+#: 0.811, max climb 24 deg: the 178 basins ended 0.04-0.33 deg over, ranked after the
+#: feasible 250 ones, and the plan came out at 241 against 177 at 23 and 176 at 25 deg).
+SLOPE_SCREEN_SLACK = 1.0
 
 
 def basin_lead(p: Problem, ranked: list[tuple[float, NDArray]]) -> float:
@@ -141,7 +147,8 @@ def slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: floa
     limit-free basin that climbs a wall may lose to one that does not. Seeds the coarse
     run could not bring within the slopes rank last. Returns the ranking and the lead of
     its best basin over the next distinct one (:func:`basin_lead`; NaN, not known, when no
-    seed met the slopes); ``tolerance`` is the screening's stopping tolerance.
+    seed met the slopes within SLOPE_SCREEN_SLACK); ``tolerance`` is the screening's
+    stopping tolerance.
 
     Seeds named in ``optimal`` are box-only optima already, whose J holding the slopes
     can only rise from: one whose J is already at least the second-best held J cannot
@@ -174,7 +181,8 @@ def slope_screening(p: Problem, screened: list, bounds: Box | None, cutoff: floa
                             tolerance=tolerance)
         j = p.cost(res.points).J
         # Through a threat (J inf: a line the minimiser cannot move off) ranks last too.
-        ok = check_limits(res.points, slopes, floor).feasible and np.isfinite(j)
+        breach = check_limits(res.points, slopes, floor).violations
+        ok = max(breach.values(), default=0.0) <= SLOPE_SCREEN_SLACK and np.isfinite(j)
         held.append((not ok, j, f'{name} (slopes held)', seq, res.points, res.constrained))
     held.sort(key=lambda item: item[:2])
     feasible = [(item[1], item[4]) for item in held if not item[0]]
