@@ -119,3 +119,19 @@ def test_the_winner_is_polished_never_above_its_unpolished_j(monkeypatch):
                     for w in (0.2, 0.5)]
     assert all(a <= b for a, b in zip(j['polished'], j['plain']))
     assert j['polished'][1] < (1.0 - 1e-4) * j['plain'][1]    # 155.06 -> 154.97 measured
+
+
+@pytest.mark.parametrize('name, w', [('uniform20_1', 0.811), ('uniform20_0', 0.544)])
+def test_a_looser_climb_limit_never_plans_higher(name, w):
+    """The path planned at max climb c meets every looser limit, so J may only fall as c
+    rises. Under the circumradius rule (e12b44a) uniform20_1 at w 0.811 rose +25 % at 24
+    deg (a 154 deg turn after a 0.95 m segment) and uniform20_0 at w 0.544 rose 5 times
+    (up to +7.8 % at 29 deg); with the fillet rule but the slope screening strict
+    (d712ab7), uniform20_1 rose +36 % at 24 deg (its 178 basins ended 0.04-0.33 deg over
+    the slopes and ranked last)."""
+    sc = _bundled(name)
+    js = [plan(sc.threats, sc.start, sc.goal, sc.box,
+               PlannerConfig(w=w, max_climb_deg=float(c))).cost.J for c in range(20, 40)]
+    rises = [(20 + i + 1, b / a) for i, (a, b) in enumerate(zip(js, js[1:]))
+             if b > (1.0 + TOLERANCE) * a]
+    assert not rises, rises

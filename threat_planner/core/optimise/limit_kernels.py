@@ -21,6 +21,8 @@ __all__ = ['LimitTerm', 'measure']
 _TINY = 1e-300
 #: Floor of a segment length in a turn's terms: its square and products stay above zero.
 _SHORT = 1e-150
+#: Rounding of |u - v| = 2 sin(theta / 2) at a straight vertex, where the norm has a kink.
+_EPS = 1e-9
 #: Segments shorter than this fraction of the longest (or of 1 m) count as zero length.
 DEGENERATE = 1e-12
 
@@ -91,17 +93,44 @@ def measure(points: NDArray, floor_z: float) -> tuple[float, float, float, float
 
 
 @njit(cache=True)
-def _cos_turn(points, i):
-    """cos of the turn at vertex i and the lengths of the segments before and after it."""
-    ax = points[i, 0] - points[i - 1, 0]
-    ay = points[i, 1] - points[i - 1, 1]
-    az = points[i, 2] - points[i - 1, 2]
-    bx = points[i + 1, 0] - points[i, 0]
-    by = points[i + 1, 1] - points[i, 1]
-    bz = points[i + 1, 2] - points[i, 2]
-    la = max(math.sqrt(ax * ax + ay * ay + az * az), _SHORT)
-    lb = max(math.sqrt(bx * bx + by * by + bz * bz), _SHORT)
-    return (ax * bx + ay * by + az * bz) / (la * lb), la, lb
+def _half_turn(points, i, r_min, side, n, grad_out, want_grad):
+    """Radius row of vertex i for one side: (t |u + v| - |u - v|_eps) / 2, and its gradient.
+
+    u, v are the unit segments before and after the vertex, t = share / R_min of the
+    segment on ``side`` (0 before, 1 after), so the row is t cos(theta / 2) - sin(theta / 2):
+    >= 0 exactly where tan(theta / 2) <= t. Its slope along the segment's length is
+    alpha cos(theta / 2) / (2 R_min), which does not vanish as the segment shrinks (the
+    squared form's did, and the penalty folded paths into zero-length segments it could
+    not leave). With want_grad, dg/da and dg/db go into grad_out[0], grad_out[1].
+    """
+    a = points[i] - points[i - 1]
+    b = points[i + 1] - points[i]
+    la = max(math.sqrt(a @ a), _SHORT)
+    lb = max(math.sqrt(b @ b), _SHORT)
+    u = a / la
+    v = b / lb
+    p = u + v
+    m = u - v
+    big_p = math.sqrt(p @ p)
+    big_m = math.sqrt(m @ m + _EPS * _EPS)
+    seg = i - 1 if side == 0 else i
+    alpha = 1.0 if seg == 0 or seg == n - 1 else 0.5
+    t = alpha * (la if side == 0 else lb) / r_min
+    g = 0.5 * (t * big_p - (big_m - _EPS))
+    if want_grad:
+        # d|p|/dp = p / |p| (0 at a hairpin), d|m|_eps/dm = m / |m|_eps, du/da = (I - u u') / |a|.
+        pp = p / big_p if big_p > _SHORT else p * 0.0
+        wa = t * pp - m / big_m
+        wb = t * pp + m / big_m
+        ga = 0.5 * (wa - u * (u @ wa)) / la
+        gb = 0.5 * (wb - v * (v @ wb)) / lb
+        if side == 0:
+            ga = ga + 0.5 * big_p * alpha / r_min * u
+        else:
+            gb = gb + 0.5 * big_p * alpha / r_min * v
+        grad_out[0] = ga
+        grad_out[1] = gb
+    return g
 
 
 @njit(cache=True)
@@ -125,17 +154,12 @@ def _values(points, sin_c, sin_d, r_min, on_c, on_d, on_r, out):
             out[row] = (h * sn + sign * dz * cs) / (ln if ln > 0 else 1.0)
             row += 1
     if on_r:
-        # Two rows a vertex, cos(theta) - (1 - t^2) / (1 + t^2) with t = share / R_min for
-        # the segment before it (first block) and the one after it (second block): >= 0
-        # exactly where the fillet fits that share (tan(theta / 2) <= t). Smooth wherever
-        # the segments have length, bounded in [-2, 2], and a hairpin is -2, not 0.
+        # Two rows a vertex (_half_turn), for the share of the segment before it (first
+        # block) and of the one after it (second block).
+        scratch = np.empty((2, 3))
         for side in range(2):
             for i in range(1, n):
-                seg = i - 1 if side == 0 else i
-                cos, la, lb = _cos_turn(points, i)
-                share = (la if side == 0 else lb) * (1.0 if seg == 0 or seg == n - 1 else 0.5)
-                t = share / r_min
-                out[row] = cos - (1.0 - t * t) / (1.0 + t * t)
+                out[row] = _half_turn(points, i, r_min, side, n, scratch, False)
                 row += 1
     return row
 
@@ -192,31 +216,18 @@ def _penalty(points, sin_c, sin_d, r_min, on_c, on_d, on_r, lam, mu, g, grad):
             grad[s_, 1] += s * fy
             grad[s_, 2] += s * fz
     if on_r:
+        dg = np.empty((2, 3))
         for side in range(2):
             for i in range(1, n):
                 s = g[row]
                 row += 1
                 if s == 0.0:
                     continue
-                a = points[i] - points[i - 1]
-                b = points[i + 1] - points[i]
-                cos, la, lb = _cos_turn(points, i)
-                # d cos / da = b / (|a| |b|) - cos a / |a|^2, likewise for b.
-                da = b / (la * lb) - cos * a / (la * la)
-                db = a / (la * lb) - cos * b / (lb * lb)
-                seg = i - 1 if side == 0 else i
-                alpha = 1.0 if seg == 0 or seg == n - 1 else 0.5
-                t = alpha * (la if side == 0 else lb) / r_min
-                # g = cos - q(t), dq/dt = -4 t / (1 + t^2)^2, dt / d(its segment) = alpha u / R.
-                dg_dlen = 4.0 * t / ((1.0 + t * t) ** 2) * alpha / r_min
-                if side == 0:
-                    da = da + dg_dlen * a / la
-                else:
-                    db = db + dg_dlen * b / lb
+                _half_turn(points, i, r_min, side, n, dg, True)
                 # The term's gradient is -s dg/dx; a = x_i - x_(i-1), b = x_(i+1) - x_i.
-                grad[i - 1] += s * da
-                grad[i] -= s * (da - db)
-                grad[i + 1] -= s * db
+                grad[i - 1] += s * dg[0]
+                grad[i] -= s * (dg[0] - dg[1])
+                grad[i + 1] -= s * dg[1]
     return val / (2.0 * mu), m
 
 

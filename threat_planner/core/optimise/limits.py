@@ -21,9 +21,10 @@ radius of ~2.5 m at 40 segments over a 100 m field and ~1.3 m at 80.
 
 The optimiser sees the limits as smooth constraints g >= 0 (dimensionless, O(1)):
 climb ``sin(c - angle)``, dive ``sin(v + angle)``, and for the radius two rows a vertex,
-one for each segment's share: ``cos(theta) - (1 - t^2) / (1 + t^2)``, t = share / R_min,
-which is >= 0 exactly where tan(theta / 2) <= t (in [-2, 2], a hairpin -2); the minimum
-altitude is a bound.
+one for each segment's share: ``t cos(theta / 2) - sin(theta / 2)``, t = share / R_min,
+which is >= 0 exactly where tan(theta / 2) <= t (a hairpin -1), computed as
+``(t |u + v| - |u - v|) / 2`` from the segments' directions u, v; its slope along a
+segment's length does not vanish as the segment shrinks. The minimum altitude is a bound.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from threat_planner.core.optimise.limit_kernels import DEGENERATE, LimitTerm, measure
+from threat_planner.core.optimise.limit_kernels import _EPS, DEGENERATE, LimitTerm, measure
 
 __all__ = ['FlightLimits', 'LimitCheck', 'check_limits', 'climb_angles', 'meets_limits',
            'constraint_jacobian', 'constraint_values', 'constraint_vjp', 'turn_radii']
@@ -271,22 +272,30 @@ def _blocks(points: NDArray, limits: FlightLimits
         row += n
     if limits.radius_on and n >= 2:
         # Two rows a vertex (module docstring): the share of the segment before it, then of
-        # the one after it; a = x_i - x_(i-1), b = x_(i+1) - x_i.
+        # the one after it; a = x_i - x_(i-1), b = x_(i+1) - x_i, u and v their directions.
         a, b = d[:-1], d[1:]
-        la, lb = np.maximum(ln[:-1], 1e-150), np.maximum(ln[1:], 1e-150)
-        cos = np.einsum('ik,ik->i', a, b) / (la * lb)
-        dcos_a = b / (la * lb)[:, None] - (cos / la ** 2)[:, None] * a
-        dcos_b = a / (la * lb)[:, None] - (cos / lb ** 2)[:, None] * b
+        la, lb = np.maximum(ln[:-1], 1e-150)[:, None], np.maximum(ln[1:], 1e-150)[:, None]
+        u, v = a / la, b / lb
+        p_, m_ = u + v, u - v
+        big_p = np.linalg.norm(p_, axis=1, keepdims=True)
+        big_m = np.sqrt(np.einsum('ik,ik->i', m_, m_) + _EPS ** 2)[:, None]
+        unit_p = np.divide(p_, big_p, out=np.zeros_like(p_), where=big_p > 1e-150)
         alpha = np.full(n, 0.5)
         alpha[[0, -1]] = 1.0
         verts = np.stack([np.arange(n - 1), np.arange(1, n), np.arange(2, n + 1)], axis=1)
         r_min = limits.min_turn_radius_m
-        for side, (seg_len, seg_alpha) in enumerate(((la, alpha[:-1]), (lb, alpha[1:]))):
+        for side, (seg_len, seg_alpha) in enumerate(((la, alpha[:-1, None]),
+                                                     (lb, alpha[1:, None]))):
             t = seg_alpha * seg_len / r_min
-            values.append(cos - (1.0 - t * t) / (1.0 + t * t))
-            grow = (4.0 * t / (1.0 + t * t) ** 2 * seg_alpha / r_min)[:, None]
-            da = dcos_a + (grow * a / la[:, None] if side == 0 else 0.0)
-            db = dcos_b + (grow * b / lb[:, None] if side == 1 else 0.0)
+            values.append((0.5 * (t * big_p - (big_m - _EPS)))[:, 0])
+            wa, wb = t * unit_p - m_ / big_m, t * unit_p + m_ / big_m
+            da = 0.5 * (wa - u * np.einsum('ik,ik->i', u, wa)[:, None]) / la
+            db = 0.5 * (wb - v * np.einsum('ik,ik->i', v, wb)[:, None]) / lb
+            grow = 0.5 * big_p * seg_alpha / r_min
+            if side == 0:
+                da = da + grow * u
+            else:
+                db = db + grow * v
             blocks.append((np.arange(row, row + n - 1), verts,
                            np.stack([-da, da - db, db], axis=1)))
             row += n - 1
