@@ -29,8 +29,10 @@ DEGENERATE = 1e-12
 
 @njit(cache=True)
 def _fillet(a, b, share):
-    """Radius [m] of the arc tangent to segments a, b whose tangent points lie within
-    ``share`` of the vertex: share / tan(theta / 2), theta the turn between them."""
+    """Radius [m] of the arc tangent to segments a, b within ``share`` of their vertex.
+
+    share / tan(theta / 2), theta the turn between them.
+    """
     la = math.sqrt(a @ a)
     lb = math.sqrt(b @ b)
     cx = a[1] * b[2] - a[2] * b[1]
