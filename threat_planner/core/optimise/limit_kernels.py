@@ -95,44 +95,62 @@ def measure(points: NDArray, floor_z: float) -> tuple[float, float, float, float
 
 
 @njit(cache=True)
-def _half_turn(points, i, r_min, side, n, grad_out, want_grad):
-    """Radius row of vertex i for one side: (t |u + v| - |u - v|_eps) / 2, and its gradient.
+def _half_turn(points, i, r_min, n, grad_out, want_grad):
+    """Both radius rows of vertex i, (t |u + v| - |u - v|_eps) / 2, and their gradients.
 
-    u, v are the unit segments before and after the vertex, t = share / R_min of the
-    segment on ``side`` (0 before, 1 after), so the row is t cos(theta / 2) - sin(theta / 2):
-    >= 0 exactly where tan(theta / 2) <= t. Its slope along the segment's length is
-    alpha cos(theta / 2) / (2 R_min), which does not vanish as the segment shrinks (the
-    squared form's did, and the penalty folded paths into zero-length segments it could
-    not leave). With want_grad, dg/da and dg/db go into grad_out[0], grad_out[1].
+    u, v are the unit segments a, b before and after the vertex and t = share / R_min of
+    the segment before it (first row) or after it (second row), so a row is
+    t cos(theta / 2) - sin(theta / 2): >= 0 exactly where tan(theta / 2) <= t. Its slope
+    along the segment's length is alpha cos(theta / 2) / (2 R_min), which does not vanish
+    as the segment shrinks (the squared form's did, and the penalty folded paths into
+    zero-length segments it could not leave). With want_grad, grad_out rows 0-1 get
+    dg/da, dg/db of the first row and rows 2-3 those of the second. Scalars throughout:
+    small arrays made in a compiled loop cost more than the arithmetic.
     """
-    a = points[i] - points[i - 1]
-    b = points[i + 1] - points[i]
-    la = max(math.sqrt(a @ a), _SHORT)
-    lb = max(math.sqrt(b @ b), _SHORT)
-    u = a / la
-    v = b / lb
-    p = u + v
-    m = u - v
-    big_p = math.sqrt(p @ p)
-    big_m = math.sqrt(m @ m + _EPS * _EPS)
-    seg = i - 1 if side == 0 else i
-    alpha = 1.0 if seg == 0 or seg == n - 1 else 0.5
-    t = alpha * (la if side == 0 else lb) / r_min
-    g = 0.5 * (t * big_p - (big_m - _EPS))
+    ax = points[i, 0] - points[i - 1, 0]
+    ay = points[i, 1] - points[i - 1, 1]
+    az = points[i, 2] - points[i - 1, 2]
+    bx = points[i + 1, 0] - points[i, 0]
+    by = points[i + 1, 1] - points[i, 1]
+    bz = points[i + 1, 2] - points[i, 2]
+    la = max(math.sqrt(ax * ax + ay * ay + az * az), _SHORT)
+    lb = max(math.sqrt(bx * bx + by * by + bz * bz), _SHORT)
+    ux, uy, uz = ax / la, ay / la, az / la
+    vx, vy, vz = bx / lb, by / lb, bz / lb
+    px, py, pz = ux + vx, uy + vy, uz + vz
+    mx, my, mz = ux - vx, uy - vy, uz - vz
+    big_p = math.sqrt(px * px + py * py + pz * pz)
+    big_m = math.sqrt(mx * mx + my * my + mz * mz + _EPS * _EPS)
+    alpha_a = 1.0 if i == 1 else 0.5
+    alpha_b = 1.0 if i == n - 1 else 0.5
+    t_a = alpha_a * la / r_min
+    t_b = alpha_b * lb / r_min
+    sin_half = big_m - _EPS
+    g_a = 0.5 * (t_a * big_p - sin_half)
+    g_b = 0.5 * (t_b * big_p - sin_half)
     if want_grad:
-        # d|p|/dp = p / |p| (0 at a hairpin), d|m|_eps/dm = m / |m|_eps, du/da = (I - u u') / |a|.
-        pp = p / big_p if big_p > _SHORT else p * 0.0
-        wa = t * pp - m / big_m
-        wb = t * pp + m / big_m
-        ga = 0.5 * (wa - u * (u @ wa)) / la
-        gb = 0.5 * (wb - v * (v @ wb)) / lb
-        if side == 0:
-            ga = ga + 0.5 * big_p * alpha / r_min * u
+        # d|p|/dp = p / |p| (0 at a hairpin), d|m|_eps/dm = m / |m|_eps,
+        # du/da = (I - u u') / |a|, dv/db = (I - v v') / |b|.
+        if big_p > _SHORT:
+            qx, qy, qz = px / big_p, py / big_p, pz / big_p
         else:
-            gb = gb + 0.5 * big_p * alpha / r_min * v
-        grad_out[0] = ga
-        grad_out[1] = gb
-    return g
+            qx = qy = qz = 0.0
+        hx, hy, hz = mx / big_m, my / big_m, mz / big_m
+        for k in range(2):
+            t = t_a if k == 0 else t_b
+            wax, way, waz = t * qx - hx, t * qy - hy, t * qz - hz
+            wbx, wby, wbz = t * qx + hx, t * qy + hy, t * qz + hz
+            ua = ux * wax + uy * way + uz * waz
+            vb = vx * wbx + vy * wby + vz * wbz
+            ca = 0.5 * big_p * alpha_a / r_min if k == 0 else 0.0
+            cb = 0.5 * big_p * alpha_b / r_min if k == 1 else 0.0
+            grad_out[2 * k, 0] = 0.5 * (wax - ux * ua) / la + ca * ux
+            grad_out[2 * k, 1] = 0.5 * (way - uy * ua) / la + ca * uy
+            grad_out[2 * k, 2] = 0.5 * (waz - uz * ua) / la + ca * uz
+            grad_out[2 * k + 1, 0] = 0.5 * (wbx - vx * vb) / lb + cb * vx
+            grad_out[2 * k + 1, 1] = 0.5 * (wby - vy * vb) / lb + cb * vy
+            grad_out[2 * k + 1, 2] = 0.5 * (wbz - vz * vb) / lb + cb * vz
+    return g_a, g_b
 
 
 @njit(cache=True)
@@ -158,11 +176,11 @@ def _values(points, sin_c, sin_d, r_min, on_c, on_d, on_r, out):
     if on_r:
         # Two rows a vertex (_half_turn), for the share of the segment before it (first
         # block) and of the one after it (second block).
-        scratch = np.empty((2, 3))
-        for side in range(2):
-            for i in range(1, n):
-                out[row] = _half_turn(points, i, r_min, side, n, scratch, False)
-                row += 1
+        scratch = np.empty((4, 3))
+        for i in range(1, n):
+            out[row + i - 1], out[row + n - 2 + i] = _half_turn(points, i, r_min, n, scratch,
+                                                                False)
+        row += 2 * (n - 1)
     return row
 
 
@@ -218,18 +236,20 @@ def _penalty(points, sin_c, sin_d, r_min, on_c, on_d, on_r, lam, mu, g, grad):
             grad[s_, 1] += s * fy
             grad[s_, 2] += s * fz
     if on_r:
-        dg = np.empty((2, 3))
-        for side in range(2):
-            for i in range(1, n):
-                s = g[row]
-                row += 1
-                if s == 0.0:
-                    continue
-                _half_turn(points, i, r_min, side, n, dg, True)
-                # The term's gradient is -s dg/dx; a = x_i - x_(i-1), b = x_(i+1) - x_i.
-                grad[i - 1] += s * dg[0]
-                grad[i] -= s * (dg[0] - dg[1])
-                grad[i + 1] -= s * dg[1]
+        dg = np.empty((4, 3))
+        for i in range(1, n):
+            s_a = g[row + i - 1]
+            s_b = g[row + n - 2 + i]
+            if s_a == 0.0 and s_b == 0.0:
+                continue
+            _half_turn(points, i, r_min, n, dg, True)
+            # The term's gradient is -s dg/dx; a = x_i - x_(i-1), b = x_(i+1) - x_i.
+            for k in range(3):
+                da = s_a * dg[0, k] + s_b * dg[2, k]
+                db = s_a * dg[1, k] + s_b * dg[3, k]
+                grad[i - 1, k] += da
+                grad[i, k] -= da - db
+                grad[i + 1, k] -= db
     return val / (2.0 * mu), m
 
 
