@@ -69,16 +69,28 @@ def test_killed_mid_run_then_resumed_equals_the_uninterrupted_table(study, whole
     assert rows(pq.read_table(out / 'results.parquet')) == rows(whole)
 
 
-def test_ctrl_c_stops_the_run_and_the_same_command_resumes_it(study, whole, tmp_path):
-    out = tmp_path / 'out'
+def _interrupted_run(study, out):
+    """Run the study and SIGINT it once its first chunk is committed: (returncode, stderr)."""
     run = subprocess.Popen([sys.executable, '-m', 'threat_planner.cli', 'batch', str(study),
-                            '--out', str(out), '--workers', '2'], cwd=ROOT,
+                            '--out', str(out), '--workers', '1'], cwd=ROOT,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     while not list((out / 'parts').glob('*.parquet')) and run.poll() is None:
         time.sleep(0.005)
     run.send_signal(signal.SIGINT)
-    stdout, stderr = run.communicate(timeout=120)
-    assert run.returncode == 130, stderr
+    _, stderr = run.communicate(timeout=120)
+    return run.returncode, stderr
+
+
+def test_ctrl_c_stops_the_run_and_the_same_command_resumes_it(study, whole, tmp_path):
+    # One worker runs the chunks one after another, so the SIGINT lands with most of them
+    # still to run; a run that had already ended (CI once: exit 0, every row done) is a
+    # missed moment, not the claim, and is tried again in a new folder.
+    for attempt in range(3):
+        out = tmp_path / f'out{attempt}'
+        code, stderr = _interrupted_run(study, out)
+        if code != 0:
+            break
+    assert code == 130, stderr
     assert stderr.replace('\r', '\n').strip().splitlines()[-1] == 'threat-planner: interrupted'
     assert 'Traceback' not in stderr
     store = Store(out, load_study(study))
