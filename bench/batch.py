@@ -391,7 +391,7 @@ def report(r: dict) -> str:
     lines += ['', f"Robust lower in {sum(v < 0 for v in changes)} of {len(changes)} cases; "
               f"in {kept} the robust plan is the nominal path itself (no plan of the merged "
               "field, nor the nominal path refined on it, scored lower on the robust plan's "
-              "own pictures); "
+              "own pictures and on as many held out); "
               f"median change {100 * statistics.median(changes):+.2f} %, range "
               f"{100 * min(changes):+.2f} to {100 * max(changes):+.2f} %."
               + (f" Not lower: {'; '.join(worse)}." if worse else '')]
