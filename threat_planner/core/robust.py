@@ -246,7 +246,7 @@ def plan_robust(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Bo
                                                   first=samples, antithetic=antithetic))
             fitted, plain = (picture_costs(p, [others], config.w)[0].J
                              for p in (result.path, nominal.path))
-            if not fitted < plain and (result.feasible or not nominal.feasible):
+            if not fitted < plain and (nominal.feasible or not result.feasible):
                 result = _as_is(nominal, merged, config, 'held out')
     result.timings_ms = {**timings, 'total_ms': sum(timings.values())}
     return result
@@ -265,17 +265,20 @@ def _refined(nominal: PlanResult, merged: ThreatField, config: PlannerConfig) ->
     # start met (big300_0 at w 0.5: the merged field's own plan was then kept, 3 % above
     # the nominal path on the pictures).
     if (not check.feasible, start.J) < (not cand.limit_check.feasible, cand.cost.J):
-        return _as_is(nominal, merged, config, 'unrefined')
+        return _as_is(nominal, merged, config, 'unrefined', problem.clock)
     problem.clock.lap('refine_ms')
     return plan_result(problem, cand)
 
 
-def _as_is(nominal: PlanResult, merged: ThreatField, config: PlannerConfig,
-           why: str) -> PlanResult:
-    """Return the nominal plan's path as it is, scored on the merged field."""
+def _as_is(nominal: PlanResult, merged: ThreatField, config: PlannerConfig, why: str,
+           clock: Clock | None = None) -> PlanResult:
+    """Return the nominal plan's path as it is, scored on the merged field.
+
+    ``clock``: the one that timed the refinement this replaces (its refine_ms is kept).
+    """
     _, s, t, box, _ = nominal.problem
     problem = Problem(threats=merged, s=s, t=t, box=box, config=config,
-                      network=nominal.network, edge_j=None, clock=Clock())
+                      network=nominal.network, edge_j=None, clock=clock or Clock())
     path = nominal.path
     initial = np.vstack([s, nominal.network.nodes[nominal.node_sequence], t])
     cand = Candidate(seq=list(nominal.node_sequence), initial=initial, smoothed=None,

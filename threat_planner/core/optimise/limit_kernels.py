@@ -18,7 +18,6 @@ from threat_planner.core.cost.kernels import njit
 
 __all__ = ['LimitTerm', 'measure']
 
-_TINY = 1e-300
 #: Floor of a segment length in a turn's terms: its square and products stay above zero.
 _SHORT = 1e-150
 #: Rounding of |u - v| = 2 sin(theta / 2) at a straight vertex, where the norm has a kink.
