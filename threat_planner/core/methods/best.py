@@ -274,10 +274,11 @@ def _polish(p: Problem, best: Candidate) -> Candidate:
     """
     if len(best.final) != p.config.n_points + 1:
         return best
-    if best.levels and best.cost.J <= p.cost(best.levels[-1]).J:
+    coarse_j = p.cost(best.levels[-1]).J if best.levels else None
+    if coarse_j is not None and best.cost.J <= coarse_j:
         return best
     tries = [best.final]
-    if best.levels and best.cost.J > (1.0 + UNSETTLED) * p.cost(best.levels[-1]).J:
+    if coarse_j is not None and best.cost.J > (1.0 + UNSETTLED) * coarse_j:
         # Far above: the finest level went astray (a vertex pinned onto a start in a
         # corner of the box, its segment folded to nothing); from the coarser answer too.
         tries.append(resample(best.levels[-1], p.config.n_points))
