@@ -33,7 +33,7 @@ import sys
 import tempfile
 import time
 
-from bench.toolkit.repo import command, DATA, RESULTS, ROOT
+from bench.toolkit.repo import command, DATA, machine, RESULTS, ROOT
 
 SCENARIO = DATA / 'uniform20_0.yaml'
 COLCON = Path(sys.executable).with_name('colcon')
@@ -197,7 +197,7 @@ def report(cli: dict, node: dict, commit: str) -> str:
     lines = [f'# Cold start ({date.today().isoformat()}, {commit})', '',
              f'`{command("cold_start")}`; scenario `{SCENARIO.name}` (20 threats), fresh '
              'processes, copies of the sources at new paths with empty caches; one run, '
-             'so the figures are side by side on the same (shared, 2-core) machine; load '
+             f'so the figures are side by side on the same (shared) machine, {machine()}; load '
              'average at the end ' + ', '.join(f'{x:.1f}' for x in os.getloadavg()) + '.', '',
              '| what | measured | target |', '|---|---:|---:|']
     lines += [f'| {a} | {b} | {c} |' for a, b, c in rows]

@@ -41,7 +41,7 @@ import time
 import numpy as np
 
 from bench.toolkit.checkouts import short_commit
-from bench.toolkit.repo import RESULTS, ROOT
+from bench.toolkit.repo import machine, RESULTS, ROOT
 from bench.toolkit.timing import timed
 
 OUT = RESULTS / 'perturbation.md'
@@ -116,7 +116,7 @@ def markdown(rows: list[dict], commit: str = '') -> str:
     sizes = list(rows[0]['ratios']) if rows else []
     lines = ['# J under 1 nm, 1 um and 1 mm moves of every threat', '',
              f'Written by `python -m bench perturbation` on {time.strftime("%Y-%m-%d")} '
-             f'(`{commit}`). Every threat moved by the size in a random direction, '
+             f'(`{commit}`) on {machine()}. Every threat moved by the size in a random direction, '
              f'{SEEDS} such fields per case and size; cold plans of `best`; ratio = '
              'J(moved) / J(given), both exact. Worse = ratio above '
              f'{1 + WORSE:g} (the target: none); moved = |ratio - 1| above {WORSE:g}. A '

@@ -25,3 +25,26 @@ def suite_process(suite: str, *args: str) -> list[str]:
     boot = (f'import sys; sys.path.insert(0, {str(ROOT)!r}); '
             'from bench.__main__ import main; sys.exit(main())')
     return [sys.executable, '-c', boot, suite, *args]
+
+
+def machine() -> str:
+    """Return the CPU the results were measured on: model, LLVM's name for it, cores.
+
+    Rounding, and so a basin chosen where two are close, can differ between CPUs (numba
+    compiles for the host's instruction set), so a result that must hold on every CPU
+    names the one it was seen on.
+    """
+    import os
+    model = 'unknown CPU'
+    try:
+        with open('/proc/cpuinfo', encoding='utf-8') as info:
+            model = next(line.split(':', 1)[1].strip() for line in info
+                         if line.startswith('model name'))
+    except (OSError, StopIteration):
+        pass
+    try:
+        import llvmlite.binding as llvm
+        target = llvm.get_host_cpu_name()
+    except Exception:  # noqa: BLE001 - a description only
+        target = '?'
+    return f'{model} (LLVM target {target}, {os.cpu_count()} CPUs)'
