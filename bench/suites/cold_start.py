@@ -13,8 +13,9 @@ a cache folder of its own:
   after :func:`threat_planner.core.compiled.ensure_compiled` (what the node does);
 * ``colcon build`` of another copy into a temporary prefix with an empty cache (the
   build compiles), then ``planner_node`` from the install, fed the 20-threat scenario by
-  ``threat_publisher``: seconds from the node's start to its first path, first and second
-  start.
+  ``threat_publisher``: seconds from the node's start to its 'ready' line, to its first
+  path (the node's log stamps) and to that path's arrival at a new subscriber, on the first
+  start and on later ones.
 
 Writes ``bench/results/cold_start.md``.
 """
@@ -37,6 +38,8 @@ from bench.toolkit.repo import command, DATA, machine, RESULTS, ROOT
 
 SCENARIO = DATA / 'uniform20_0.yaml'
 COLCON = Path(sys.executable).with_name('colcon')
+#: Starts of the installed node after the first one.
+SECOND_STARTS = 3
 
 PLAN_IN_PROCESS = r"""
 import json, sys, time
@@ -113,8 +116,26 @@ def measure_cli(work: Path, repeats: int) -> dict:
     return out
 
 
-def _first_path(install: Path, cache: Path, work: Path, tag: str) -> float:
-    """Seconds from starting the installed planner_node to its first path."""
+def _log_stamp(log: Path, text: str) -> float | None:
+    """Return the ROS log stamp [s since the epoch] of the first line holding `text`."""
+    for line in log.read_text(errors='replace').splitlines():
+        if text in line and line.startswith('[') and '] [' in line:
+            try:
+                return float(line.split('] [', 2)[1].split(']', 1)[0])
+            except ValueError:
+                continue
+    return None
+
+
+def _first_path(install: Path, cache: Path, work: Path, tag: str) -> dict:
+    """Seconds from starting the installed planner_node to its first path.
+
+    Three clocks: ``ready_s`` and ``published_s``, the node's own log stamps of its
+    'ready' line and of its first 'plan for input' line; ``received_s``, when this
+    process's subscriber got the latched path (it also waits on DDS discovery between a
+    new subscriber and the new node, which once the first announcements are missed
+    waits for the next periodic one).
+    """
     from bench.toolkit.node import domain_id, RosClient, stop_process
     from nav_msgs.msg import Path as PathMsg
     from node_harness import ros_env
@@ -125,11 +146,12 @@ def _first_path(install: Path, cache: Path, work: Path, tag: str) -> float:
     env.pop('PYTHONPATH', None)   # only what local_setup.sh puts on the path
     share = install / 'threat_planner' / 'share' / 'threat_planner'
     procs = []
+    node_log = work / f'{tag}_planner_node.log'
     try:
         client.subscribe('/path', PathMsg)
         run = '. "$1/local_setup.sh" && shift && exec "$@"'
         lib = install / 'threat_planner' / 'lib' / 'threat_planner'
-        t0 = time.perf_counter()
+        epoch0, t0 = time.time(), time.perf_counter()
         params = str(share / 'config' / 'planner.yaml')
         scenario = str(share / 'scenarios' / SCENARIO.name)
         for exe, args in (('planner_node', ['--params-file', params]),
@@ -141,11 +163,15 @@ def _first_path(install: Path, cache: Path, work: Path, tag: str) -> float:
                                           stdin=subprocess.DEVNULL))
             log.close()
         client.wait_for('/path', lambda m: len(m.poses) >= 2, timeout=300.0)
-        return time.perf_counter() - t0
+        out = {'received_s': time.perf_counter() - t0}
     finally:
         for p in reversed(procs):
             stop_process(p)
         client.close()
+    for key, text in (('ready_s', ']: ready: '), ('published_s', ']: plan for input #')):
+        stamp = _log_stamp(node_log, text)
+        out[key] = float('nan') if stamp is None else stamp - epoch0
+    return out
 
 
 def measure_node(work: Path) -> dict:
@@ -163,8 +189,14 @@ def measure_node(work: Path) -> dict:
                          str(tree), '--build-base', str(build / 'build'), '--install-base',
                          str(build / 'install')], env, build)
     install = build / 'install'
-    return {'build_s': t_build, 'first_start_s': _first_path(install, cache, work, 'first'),
-            'second_start_s': _first_path(install, cache, work, 'second')}
+    first = _first_path(install, cache, work, 'first')
+    later = [_first_path(install, cache, work, f'again{k}') for k in range(SECOND_STARTS)]
+    return {'build_s': t_build, 'first': first,
+            'again': {k: statistics.median(r[k] for r in later) for k in first}}
+
+
+def _node_times(t: dict) -> str:
+    return ' / '.join(f'{t[k]:.2f}' for k in ('ready_s', 'published_s', 'received_s')) + ' s'
 
 
 def report(cli: dict, node: dict, commit: str) -> str:
@@ -190,10 +222,10 @@ def report(cli: dict, node: dict, commit: str) -> str:
     if 'skipped' not in node:
         rows += [('`colcon build` with an empty cache (compiles)', f"{node['build_s']:.1f} s",
                   '-'),
-                 ('installed `planner_node`: start to first path',
-                  f"{node['first_start_s']:.2f} s",
-                  '<= 5 s'),
-                 ('the same, second start', f"{node['second_start_s']:.2f} s", '<= 1 s')]
+                 ('installed `planner_node`, first start: ready / first path published / '
+                  'received by a new subscriber', _node_times(node['first']), '<= 5 s'),
+                 (f'the same, later starts (median of {SECOND_STARTS})',
+                  _node_times(node['again']), '<= 1 s')]
     lines = [f'# Cold start ({date.today().isoformat()}, {commit})', '',
              f'`{command("cold_start")}`; scenario `{SCENARIO.name}` (20 threats), fresh '
              'processes, copies of the sources at new paths with empty caches; one run, '
