@@ -1,7 +1,8 @@
-"""Where the repository, its scenarios and the bench results are."""
+"""Where the repository, its scenarios and the bench results are, and the machine they ran on."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 import sys
 from typing import Sequence
@@ -34,7 +35,6 @@ def machine() -> str:
     compiles for the host's instruction set), so a result that must hold on every CPU
     names the one it was seen on.
     """
-    import os
     model = 'unknown CPU'
     try:
         with open('/proc/cpuinfo', encoding='utf-8') as info:

@@ -411,9 +411,7 @@ def test_threat_publisher_drives_replanning(fast_node, tmp_path, args, topic, pl
                                  for m in spheres])
 
             def through_the_poses(msg):
-                got = threat_positions(msg)
-                return got.shape == SCENARIO.threats.positions.shape and np.array_equal(
-                    got, SCENARIO.threats.positions)
+                return np.array_equal(threat_positions(msg), SCENARIO.threats.positions)
             net = fast_node.client.wait_for(fast_node.topic('network'), through_the_poses,
                                             timeout=20.0, after=nets_before)
             stamp = stamp_to_ns(next(m for m in net.markers if m.ns == 'threats').header.stamp)
