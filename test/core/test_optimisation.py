@@ -122,7 +122,7 @@ def _reference_rounds(level, x, lam, mu, maxiter, rounds, gain):
     scale = float(objective_scale(level.value(x, even)))
     term = LimitTerm(level.limits.tightened(opt.ANGLE_MARGIN_DEG, opt.RADIUS_MARGIN), level.n)
     lam = np.zeros(term.rows) if lam is None else term.transfer(lam)
-    prev_violation, prev_f, best, picked = np.inf, np.inf, None, x
+    prev_violation, prev_f, prev_j, best, picked = np.inf, np.inf, np.nan, None, x
     for _ in range(rounds):
         if level.cutoff is not None and float(np.max(np.linalg.norm(
                 x - picked, axis=1))) >= opt.REPICK_CUTOFFS * level.cutoff:
@@ -140,7 +140,12 @@ def _reference_rounds(level, x, lam, mu, maxiter, rounds, gain):
         violation = float(np.max(-c, initial=0.0))
         lam = np.maximum(0.0, lam - mu * c)
         f = level.value(x, even, scale)
-        if check_limits(x, level.limits, level.floor).feasible:
+        feasible = check_limits(x, level.limits, level.floor).feasible
+        j_round = level.value(x, 0.0)
+        if not feasible and abs(j_round - prev_j) <= 1e-9 * abs(j_round):
+            x = _unfolded(x)
+        prev_j = j_round
+        if feasible:
             j = level.value(x, 0.0)
             stop = gain is not None and best is not None and best[0] - j < gain * abs(j)
             if best is None or j < best[0]:
@@ -151,6 +156,38 @@ def _reference_rounds(level, x, lam, mu, maxiter, rounds, gain):
             mu *= opt.PENALTY_GROWTH
         prev_violation, prev_f = violation, f
     return x, lam, None if best is None else best[1]
+
+
+def _unfolded(x):
+    """x with every vertex folded onto a neighbour moved to the middle of its neighbours."""
+    from threat_planner.core.optimise.lagrangian_kernels import _unfold, FOLDED
+    z = x.reshape(-1).copy()
+    _unfold(z, FOLDED)
+    return z.reshape(x.shape)
+
+
+def test_a_folded_vertex_moves_to_the_middle_of_its_neighbours_and_the_path_stays():
+    """The turn rows' gradients grow as 1 / length at a folded vertex and L-BFGS stalls
+    there; moved to its neighbours' middle, the polyline (so J) is the one it was."""
+    from threat_planner.core.optimise.lagrangian_kernels import _unfold, FOLDED
+    threats = ThreatField.from_arrays([[50.0, 50.0, 50.0], [30.0, 60.0, 40.0]], [2e5, 1e5])
+    x = resample(np.vstack([[0.0, 0.0, 40.0], [50.0, 20.0, 80.0], [100.0, 100.0, 70.0]]), 12)
+    x[1:-1] += np.random.default_rng(7).normal(0.0, 2.0, (11, 3))
+    untouched = x.reshape(-1).copy()
+    assert _unfold(untouched, FOLDED) == 0 and np.array_equal(untouched, x.reshape(-1))
+    folded = x.copy()
+    folded[1] = folded[0] + [0.0, 1e-5, -1e-6]            # onto the start
+    folded[8] = folded[7] + [2e-6, 0.0, 0.0]              # onto the vertex before it
+    z = folded.reshape(-1).copy()
+    assert _unfold(z, FOLDED) == 2
+    p = z.reshape(-1, 3)
+    np.testing.assert_array_equal(p[1], 0.5 * (folded[0] + folded[2]))
+    np.testing.assert_array_equal(p[8], 0.5 * (folded[7] + folded[9]))
+    others = [i for i in range(len(p)) if i not in (1, 8)]
+    np.testing.assert_array_equal(p[others], folded[others])
+    j = [path_cost(q, threats.positions, threats.intensities, 0.5).J for q in (folded, p)]
+    assert j[1] == pytest.approx(j[0], rel=1e-6)
+    assert min(np.linalg.norm(np.diff(p, axis=0), axis=1)) > FOLDED * 10.0
 
 
 @pytest.mark.parametrize('cutoff', [None, 12.0])
