@@ -51,7 +51,7 @@ class PlannerProcess:
         self.proc = start_process(planner_command(ns, params), DOMAIN, log_path)
         # Read as logs (LATCHED_LOG): at depth 1 the plan_info of a start's plan was lost
         # under load when the goal's plan followed it, and a test waiting for it by its
-        # stamp timed out (test_node's pose_array_once, seen twice beside busy processes).
+        # stamp timed out (test_node's pose_array_once, in a suite run beside busy processes).
         for name, msg_type in (('path', PathMsg), ('initial_path', PathMsg),
                                ('plan_info', DiagnosticArray), ('network', MarkerArray)):
             client.subscribe(self.topic(name), msg_type, LATCHED_LOG)
