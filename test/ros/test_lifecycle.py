@@ -24,20 +24,33 @@ NS = '/lc'
 LIFECYCLE = [PYTHON, '-m', 'threat_planner.ros.lifecycle']
 
 
-def call(client, srv_type, name, request, timeout=15.0):
+def call(client, srv_type, name, request, timeout=15.0, attempts=1):
+    """Call a service; a request without an answer is sent again, up to `attempts` times.
+
+    A request sent just after the service is seen can lose its response (the server has
+    not matched this client's response reader yet, a known ROS 2 race that load widens):
+    the first get_state of a node just started went unanswered for 15 s in a suite run
+    beside busy processes. Only an idempotent request may be sent again.
+    """
     cli = client.node.create_client(srv_type, name)
     try:
         assert cli.wait_for_service(timeout_sec=timeout), f'{name} not offered'
-        future = cli.call_async(request)
-        client.wait_until(future.done, timeout, name)
-        return future.result()
+        for attempt in range(attempts):
+            future = cli.call_async(request)
+            try:
+                client.wait_until(future.done, timeout / attempts, name)
+                return future.result()
+            except TimeoutError:
+                cli.remove_pending_request(future)
+                if attempt == attempts - 1:
+                    raise
     finally:
         client.node.destroy_client(cli)
 
 
 def state_of(client):
-    return call(client, GetState, f'{NS}/threat_planner/get_state',
-                GetState.Request()).current_state.id
+    return call(client, GetState, f'{NS}/threat_planner/get_state', GetState.Request(),
+                attempts=3).current_state.id
 
 
 def transition(client, transition_id):
