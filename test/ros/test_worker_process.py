@@ -95,3 +95,36 @@ def test_timeout_cancel_and_stop_kill_the_plan():
         assert time.monotonic() - t0 < 1.0
     finally:
         worker.stop()
+
+
+def test_the_spare_starts_once_the_first_child_has_its_kernels(monkeypatch):
+    """Started with the first child, the spare's imports competed with the first child's
+    (and the node's) on two cores; it starts once the first child is ready, and a kill
+    still hands over to it."""
+    from threat_planner.ros import worker as module
+    made, ready_then = [], []
+
+    class Watched(module._PlanProcess):
+        def __init__(self):
+            ready_then.append([p.ready.is_set() for p in made])
+            super().__init__()
+            made.append(self)
+    monkeypatch.setattr(module, '_PlanProcess', Watched)
+    phases = Phases()
+    worker = ProcessPlanWorker(phases)
+    try:
+        deadline = time.monotonic() + 60.0
+        while len(made) < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        first, spare = made[:2]
+        assert ready_then[:2] == [[], [True]]
+        assert worker._child is first and worker._spare is spare
+        worker.submit(request(1, n_points=5000, max_plan_time_s=0.5))
+        phases.wait(lambda p, o: p == 'timeout')
+        # The loaded spare took over, and a new spare is on its way at once.
+        assert worker._child is spare and worker._spare is made[2] and len(made) == 3
+        worker.submit(request(2, method='paper'))
+        assert phases.wait(lambda p, o: p == 'done').request.seq == 2
+    finally:
+        assert worker.stop()
+    assert all(p.proc.exitcode is not None for p in made)

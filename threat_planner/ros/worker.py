@@ -110,8 +110,16 @@ CANCEL_STALE_AFTER_S = 1.0
 POLL_S = 0.02
 
 
-def _child_main(conn) -> None:
-    """Plan requests from `conn` until it closes; send each phase back as it is ready."""
+#: Longest wait of the spare's start for the first child's kernels [s] (a child that
+#: died meanwhile must not leave the worker without a spare for good).
+SPARE_AFTER_S = 60.0
+
+
+def _child_main(conn, ready=None) -> None:
+    """Plan requests from `conn` until it closes; send each phase back as it is ready.
+
+    ``ready`` (a multiprocessing Event) is set once the kernels are loaded.
+    """
     import signal
     import time
 
@@ -122,6 +130,8 @@ def _child_main(conn) -> None:
     # Every kernel loaded now, while the child waits for its first request.
     from threat_planner.core.compiled import ensure_compiled
     ensure_compiled()
+    if ready is not None:
+        ready.set()
 
     from threat_planner.bag.cdr import serialize_cdr
 
@@ -160,7 +170,8 @@ class _PlanProcess:
         # spawn, not fork: the parent runs DDS threads whose locks a fork would copy.
         ctx = multiprocessing.get_context('spawn')
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_child_main, args=(child,), daemon=True,
+        self.ready = ctx.Event()
+        self.proc = ctx.Process(target=_child_main, args=(child, self.ready), daemon=True,
                                 name='threat_planner_plan')
         self.proc.start()
         child.close()
@@ -181,7 +192,9 @@ class ProcessPlanWorker:
     request waits and the plan has run :data:`CANCEL_STALE_AFTER_S`, unless the previous
     plan was cancelled too (a ``'cancelled'`` phase; so some plan always finishes). A warm
     spare process takes over after a kill, so the next plan does not wait for the imports
-    of a new one.
+    of a new one. The spare starts once the first child has loaded its kernels: started
+    with it, the two children and the node loaded at once on two cores and the first
+    picture waited for the child.
 
     Parameters
     ----------
@@ -198,10 +211,19 @@ class ProcessPlanWorker:
                  name: str = 'planner') -> None:
         self._hand_over = hand_over
         self._stopped = threading.Event()
+        self._lock = threading.Lock()   # the child and the spare, swapped by two threads
         self._child = _PlanProcess()
-        self._spare: Optional[_PlanProcess] = _PlanProcess()
+        self._spare: Optional[_PlanProcess] = None
         self._cancelled_last = False   # only the worker thread reads and writes it
         self._worker = PlanWorker(self._run, name=name)
+        threading.Thread(target=self._start_spare, args=(self._child,), daemon=True,
+                         name=f'{name}_spare').start()
+
+    def _start_spare(self, first: '_PlanProcess') -> None:
+        first.ready.wait(SPARE_AFTER_S)
+        with self._lock:
+            if self._spare is None and not self._stopped.is_set():
+                self._spare = _PlanProcess()
 
     def submit(self, job: object) -> bool:
         """Make `job` the next request (see :meth:`PlanWorker.submit`)."""
@@ -216,15 +238,17 @@ class ProcessPlanWorker:
         """Kill the planning processes and end the thread; True if it ended in `timeout`."""
         self._stopped.set()
         ended = self._worker.stop(timeout)
-        for child in (self._child, self._spare):
-            if child is not None:
-                child.kill()
+        with self._lock:
+            for child in (self._child, self._spare):
+                if child is not None:
+                    child.kill()
         return ended
 
     def _replace_child(self) -> None:
-        self._child.kill()
-        self._child = self._spare if self._spare is not None else _PlanProcess()
-        self._spare = None if self._stopped.is_set() else _PlanProcess()
+        with self._lock:
+            self._child.kill()
+            self._child = self._spare if self._spare is not None else _PlanProcess()
+            self._spare = None if self._stopped.is_set() else _PlanProcess()
 
     def _run(self, request) -> None:
         import time
