@@ -5,6 +5,7 @@ helper of another folder (test/ros/test_node_full_disk.py takes test/bag's disk 
 must not depend on which folder was collected first.
 """
 
+import compileall
 from pathlib import Path
 import signal
 import sys
@@ -13,6 +14,13 @@ HERE = Path(__file__).resolve().parent
 for folder in [HERE] + sorted(p for p in HERE.iterdir() if p.is_dir() and p.name != 'data'):
     if str(folder) not in sys.path:
         sys.path.insert(0, str(folder))
+
+# This machine sets PYTHONDONTWRITEBYTECODE=1 (see bench/suites/cli_scale.py), so each of
+# the suite's child processes (some 200 nodes, CLI runs and import probes) compiled the
+# package from source again: byte-compiled here once, they load it as an installed copy
+# (pip and colcon byte-compile it). compileall writes whatever that flag says, and a
+# module edited since is compiled again (its timestamp no longer matches).
+compileall.compile_dir(str(HERE.parent / 'threat_planner'), quiet=1)
 
 # A suite started in the background of a non-interactive shell (`make test &`, nohup)
 # inherits SIGINT ignored, and so would every process it starts: the node and batch tests
