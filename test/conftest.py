@@ -6,6 +6,7 @@ must not depend on which folder was collected first.
 """
 
 import compileall
+import os
 from pathlib import Path
 import signal
 import sys
@@ -21,6 +22,20 @@ for folder in [HERE] + sorted(p for p in HERE.iterdir() if p.is_dir() and p.name
 # (pip and colcon byte-compile it). compileall writes whatever that flag says, and a
 # module edited since is compiled again (its timestamp no longer matches).
 compileall.compile_dir(str(HERE.parent / 'threat_planner'), quiet=1)
+
+# The suite's own numpy and scipy work (the yardsticks' SLSQP, reference costs) on one
+# BLAS thread, as plan() runs its own: with both cores busy a 2-thread OpenBLAS spins
+# against the load (test_yardstick.py beside two busy loops: 90 s, one thread: 23 s).
+# OpenBLAS reads the variable once, when numpy and scipy load it; the child processes
+# (nodes, CLI runs) keep the environment they would have had.
+_blas_env = os.environ.get('OPENBLAS_NUM_THREADS')
+os.environ['OPENBLAS_NUM_THREADS'] = '1'
+import numpy  # noqa: E402, F401, I100 - loads numpy's OpenBLAS under the limit
+import scipy.linalg  # noqa: E402, F401 - and scipy's
+if _blas_env is None:
+    del os.environ['OPENBLAS_NUM_THREADS']
+else:
+    os.environ['OPENBLAS_NUM_THREADS'] = _blas_env
 
 # A suite started in the background of a non-interactive shell (`make test &`, nohup)
 # inherits SIGINT ignored, and so would every process it starts: the node and batch tests
