@@ -115,6 +115,7 @@ def test_numba_imports_coverage_only_for_a_running_measurement(first, env, sees)
             'print(c.coverage_available, "coverage" in sys.modules)\n'
             'import coverage\nprint(coverage.Coverage is not None)\n')
     environment = {k: v for k, v in os.environ.items() if k != 'NUMBA_JIT_COVERAGE'}
+    environment['THREAT_PLANNER_AOT'] = '0'  # the JIT path's import (the AOT path has none)
     if env:
         environment['NUMBA_JIT_COVERAGE'] = env
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
