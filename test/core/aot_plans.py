@@ -4,7 +4,8 @@
 in a shim comparing ``numba.typeof`` of each argument with the signature the module was
 built for, and every other kernel function in one that records a call from Python (it
 would run as plain Python on the AOT path). The bundled scenarios at w 0.2/0.5/0.8,
-limits on and off, a warm replan of moved threats, the airspace scenarios; the
+limits on and off, warm replans of moved threats (uniform20_0, air_mixed_0), the
+airspace scenarios; the
 300-threat one (the parallel paths) without limits at w 0.5, last.
 """
 
@@ -92,7 +93,7 @@ def runs():
             for limits in ('on', 'off'):
                 extra = {} if limits == 'on' else dict(NO_LIMITS)
                 yield f'{name} w{w} {limits}', sc, PlannerConfig(w=w, **extra), \
-                    name == 'uniform20_0.yaml' or (w == 0.5 and limits == 'on')
+                    name in ('uniform20_0.yaml', 'air_mixed_0.yaml')
     sc = load_scenario(os.path.join(DATA, 'uniform20_0.yaml'))
     for method in ('paper', 'improved'):
         yield f'uniform20_0 {method}', sc, PlannerConfig(method=method), False
