@@ -167,3 +167,19 @@ def test_compile_no_aot_skips_the_build():
     """What the tests that compile into empty caches use: `--no-aot`."""
     out = finish(start([*COMPILE, '--no-aot']))
     assert 'AOT' not in out and out.startswith(('loaded ', 'compiled ')), out
+
+
+def test_the_kernel_helpers_import_no_numba_on_the_aot_path():
+    """ensure_compiled, kernel_stats, the batch worker's set-up: all without numba."""
+    assert _aot.load()[0] is not None, 'run threat-planner compile first'
+    code = ('import json, sys\n'
+            'from threat_planner.core.compiled import ensure_compiled, kernel_stats\n'
+            'from threat_planner.batch import local, worker\n'
+            'r = ensure_compiled()\n'
+            'worker.initialise()\n'
+            'print(json.dumps({"line": r.line(), "stats": kernel_stats(), "numba": "numba" in '
+            'sys.modules, "start": local.start_method()}))\n')
+    out = last_json(finish(start(['-c', code])))
+    assert out['numba'] is False and out['stats'] == [0, 0] and out['start'] == 'fork'
+    assert out['line'].startswith('loaded 17 compiled kernels') and \
+        '; AOT kernels loaded from' in out['line'], out['line']
