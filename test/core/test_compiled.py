@@ -26,8 +26,11 @@ def warm_cache():
 
 
 def run(code: str, env: dict | None = None, cwd: Path = ROOT) -> dict:
-    """Run `code` in a fresh interpreter; return the JSON it prints last."""
-    full = dict(os.environ, **(env or {}))
+    """Run `code` in a fresh JIT-path interpreter; return the JSON it prints last.
+
+    These are the JIT cache's claims: THREAT_PLANNER_AOT=0 (test_aot.py has the AOT's).
+    """
+    full = dict(os.environ, THREAT_PLANNER_AOT='0', **(env or {}))
     p = subprocess.run([sys.executable, '-c', code], cwd=cwd, env=full, capture_output=True,
                        text=True, timeout=300)
     assert p.returncode == 0, p.stderr[-3000:]

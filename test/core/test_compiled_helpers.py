@@ -94,7 +94,11 @@ def test_the_kernel_cache_is_named_by_every_compiled_module():
                 if '@njit(cache=True' in p.read_text()}
     assert compiled and compiled <= set(_numba_cache.SOURCES)
     # every kernel's cache lives in the folder of this hash, under its place in the package
-    where = Path(kernels._kernel._cache._cache_path)
+    kernel = kernels._kernel
+    if not hasattr(kernel, '_cache'):  # the AOT kernel: its JIT twin has the cache
+        from threat_planner.core import _aot
+        kernel = _aot.jit()['threat_planner.core.cost.kernels._kernel']
+    where = Path(kernel._cache._cache_path)
     assert where == _numba_cache.cache_dir() / 'cost'
     assert _numba_cache.cache_dir().name == _numba_cache.sources_digest() != ''
 
@@ -111,6 +115,7 @@ def test_numba_imports_coverage_only_for_a_running_measurement(first, env, sees)
             'print(c.coverage_available, "coverage" in sys.modules)\n'
             'import coverage\nprint(coverage.Coverage is not None)\n')
     environment = {k: v for k, v in os.environ.items() if k != 'NUMBA_JIT_COVERAGE'}
+    environment['THREAT_PLANNER_AOT'] = '0'  # the JIT path's import (the AOT path has none)
     if env:
         environment['NUMBA_JIT_COVERAGE'] = env
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,

@@ -13,6 +13,7 @@ from concurrent.futures import as_completed, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 import multiprocessing
 import os
+import sys
 import threading
 from typing import Iterator
 
@@ -25,11 +26,14 @@ __all__ = ['run_local', 'start_method']
 
 def start_method() -> str:
     """Return 'fork' where forking this process is safe, else 'forkserver'."""
-    try:
-        from numba.np.ufunc import parallel
-        launched = bool(getattr(parallel, '_is_initialized', True))
-    except ImportError:  # pragma: no cover - numba is required
-        launched = False
+    if 'numba' not in sys.modules:
+        launched = False  # the AOT kernels (serial): no threading layer to have launched
+    else:
+        try:
+            from numba.np.ufunc import parallel
+            launched = bool(getattr(parallel, '_is_initialized', True))
+        except ImportError:  # pragma: no cover - numba is required
+            launched = False
     # A fork copies locks held by other threads, and GNU OpenMP's pool (numba's threading
     # layer here) does not survive one.
     safe = threading.active_count() == 1 and not launched

@@ -11,6 +11,7 @@ from functools import lru_cache
 import os
 import select
 import signal
+import sys
 import threading
 import time
 
@@ -24,6 +25,11 @@ from threat_planner.errors import InputError, PlanningError
 __all__ = ['initialise', 'run_chunk', 'run_task']
 
 _STATE = {'ready': False}
+
+
+def _aot_kernels() -> bool:
+    from threat_planner.core import _aot
+    return _aot.active()
 
 
 def initialise(parent: int | None = None) -> None:
@@ -45,11 +51,14 @@ def initialise(parent: int | None = None) -> None:
     os.environ['OMP_NUM_THREADS'] = '1'
     from threadpoolctl import threadpool_limits
     threadpool_limits(limits=1)
-    try:
-        import numba
-        numba.set_num_threads(1)
-    except (ImportError, ValueError):  # pragma: no cover - numba is required
-        pass
+    if 'numba' in sys.modules or not _aot_kernels():
+        # The AOT kernels are serial: numba is imported (and told) only where it runs;
+        # its lazily built parallel kernels read OMP_NUM_THREADS above.
+        try:
+            import numba
+            numba.set_num_threads(1)
+        except (ImportError, ValueError):  # pragma: no cover - numba is required
+            pass
     if parent is not None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         threading.Thread(target=_leave_with, args=(parent,), daemon=True,

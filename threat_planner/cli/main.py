@@ -133,7 +133,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 def _cmd_compile(args: argparse.Namespace) -> int:
     from threat_planner.core.compiled import compile_all, ensure_compiled
-    report = ensure_compiled() if args.check else compile_all()
+    report = ensure_compiled() if args.check else compile_all(aot=args.aot)
     print(report.line())
     return 0
 
@@ -198,6 +198,9 @@ def build_parser() -> argparse.ArgumentParser:
                         'do it; tens of seconds once per install, then every process loads them)')
     p_compile.add_argument('--check', action='store_true',
                            help='only load the kernels the cache holds, compiling what it lacks')
+    p_compile.add_argument('--no-aot', dest='aot', action='store_false',
+                           help='fill the JIT cache only, without building the ahead-of-time '
+                                'module (~60 s once per install; also THREAT_PLANNER_AOT_BUILD=0)')
     p_compile.set_defaults(func=_cmd_compile)
     add_batch_command(sub)
     add_bag_commands(sub)

@@ -10,10 +10,11 @@ Nothing here imports rclpy or a message package, and no
 import runs back up this list (``test/test_layers.py`` checks both).
 """
 
-from threat_planner.core import _numba_cache
+from threat_planner.core import _aot, _numba_cache
 
 try:
-    _numba_cache.import_numba()  # before any kernel module does (see import_numba)
+    if _aot.module() is None:  # the AOT kernels need no numba (_aot)
+        _numba_cache.import_numba()  # before any kernel module does (see import_numba)
 except ImportError:  # pragma: no cover - numba is in install_requires
     pass
 
@@ -24,6 +25,8 @@ from threat_planner.core.inputs.settings import METHODS, SETTINGS, Setting
 from threat_planner.core.planner import check_endpoints, plan
 from threat_planner.core.result import PlanResult
 from threat_planner.core.world.threats import Box, ThreatField
+
+_aot.install()  # every kernel module is loaded now: the AOT kernels go in their place
 
 __all__ = ['Box', 'Cost', 'METHODS', 'PlanResult', 'PlannerConfig', 'SETTINGS', 'Scenario',
            'Setting', 'ThreatField', 'check_endpoints', 'load_scenario', 'path_cost', 'plan']

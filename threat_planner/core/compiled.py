@@ -8,19 +8,26 @@ writes a manifest of those signatures beside the cache. :func:`ensure_compiled` 
 every signature of the manifest (compiling what the cache lacks), so that a node or a
 worker process pays for it at start-up and not in its first plan; without a manifest
 it runs the workload. ``threat-planner compile``, ``make venv`` and ``setup.py build``
-(colcon, pip) call :func:`compile_all`.
+(colcon, pip) call :func:`compile_all`, which then builds the ahead-of-time module
+(:mod:`.aot_build`); where that module fits these sources a process uses it instead
+(:mod:`._aot`: no numba import, nothing to load), and these functions say so.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 import importlib
+import json
+import os
+from pathlib import Path
 import pickle
+import subprocess
+import sys
 import time
 
 import numpy as np
 
-from threat_planner.core import _numba_cache
+from threat_planner.core import _aot, _numba_cache
 
 __all__ = ['KERNEL_MODULES', 'KernelReport', 'compile_all', 'ensure_compiled', 'kernel_stats',
            'kernels_cached']
@@ -46,23 +53,32 @@ class KernelReport:
         compiled: Kernel signatures compiled (not found in the cache).
         loaded: Kernel signatures loaded from the cache.
         cache: The cache folder.
+        aot: Which kernels plans use (the AOT module or the JIT ones, and why), or
+            what building the AOT module did.
     """
 
     seconds: float
     compiled: int
     loaded: int
     cache: str
+    aot: str = ''
 
     def line(self) -> str:
-        """One line for a log: compiled or loaded, how many, how long."""
+        """One line for a log: compiled or loaded, how many, how long, which kernels."""
         if self.compiled:
-            return (f'compiled {self.compiled} kernel signatures in {self.seconds:.1f} s '
+            text = (f'compiled {self.compiled} kernel signatures in {self.seconds:.1f} s '
                     f'(once per install of these sources; cache {self.cache})')
-        return f'loaded {self.loaded} compiled kernels in {self.seconds:.2f} s'
+        else:
+            text = f'loaded {self.loaded} compiled kernels in {self.seconds:.2f} s'
+        return f'{text}; {self.aot}' if self.aot else text
 
 
 def _dispatchers() -> dict[str, object]:
     """Return qualified name -> numba dispatcher of every kernel (modules imported)."""
+    if _aot.active():
+        # The lazily built JIT kernels, if a large problem built them (numba not imported
+        # for this otherwise).
+        return dict(_aot._STATE['jit'] or {})
     try:
         from numba.core.dispatcher import Dispatcher
     except ImportError:  # pragma: no cover - numba is in install_requires
@@ -151,25 +167,88 @@ def kernels_cached() -> bool:
     return _read_manifest() is not None
 
 
-def compile_all() -> KernelReport:
-    """Compile (or load) every kernel through the workload and write the manifest."""
-    t0, before = time.perf_counter(), kernel_stats()
-    _workload()
-    _write_manifest()
-    return _report(t0, before)
+def _child(code: str, timeout: float) -> subprocess.CompletedProcess:
+    """Run `code` in a fresh interpreter on the JIT path, with this process's path."""
+    package = str(Path(__file__).resolve().parents[2])  # this copy of the sources
+    env = dict(os.environ, THREAT_PLANNER_AOT='0', PYTHONPATH=os.pathsep.join(
+        [package] + [p for p in [os.environ.get('PYTHONPATH')] if p]))
+    return subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def build_aot() -> str:
+    """Build the AOT module of these sources unless it is there; return one line.
+
+    Any failure (no C compiler, no Python headers, numba.pycc missing, an error) is that
+    line; plans then use the JIT kernels.
+    """
+    module, _ = _aot.load()
+    if module is not None:
+        return f'AOT kernels up to date ({_aot.aot_dir()})'
+    try:
+        done = _child('import sys; from threat_planner.core.aot_build import main; '
+                      'sys.exit(main())', timeout=1800)
+    except (OSError, subprocess.SubprocessError) as exc:
+        return f'AOT kernels not built ({exc}); plans use the JIT kernels'
+    lines = (done.stdout.strip() or done.stderr.strip() or 'no output').splitlines()
+    if done.returncode == 0:
+        return lines[-1]
+    return f'AOT kernels not built ({lines[-1][:200]}); plans use the JIT kernels'
+
+
+def compile_all(aot: bool | None = None) -> KernelReport:
+    """Compile (or load) every kernel through the workload, write the manifest, build AOT.
+
+    Parameters
+    ----------
+    aot : bool, optional
+        Build the ahead-of-time module afterwards (~60 s once per install of these
+        sources; skipped where it is there already). Default: yes, unless
+        ``THREAT_PLANNER_AOT_BUILD=0`` (the tests that compile into empty caches).
+
+    """
+    if aot is None:
+        aot = os.environ.get('THREAT_PLANNER_AOT_BUILD', '').strip() != '0'
+    if _aot.active():
+        # This process's kernels are the AOT ones: the workload fills the JIT cache in a
+        # JIT process (the lazily built parallel kernels and THREAT_PLANNER_AOT=0 use it).
+        done = _child('import json; from threat_planner.core.compiled import compile_all; '
+                      'r = compile_all(aot=False); '
+                      'print(json.dumps([r.seconds, r.compiled, r.loaded, r.cache]))', 1800)
+        if done.returncode:
+            raise RuntimeError(done.stderr.strip()[-2000:])
+        report = KernelReport(*json.loads(done.stdout.strip().splitlines()[-1]))
+    else:
+        t0, before = time.perf_counter(), kernel_stats()
+        _workload()
+        _write_manifest()
+        report = _report(t0, before)
+    if not aot:
+        return report
+    return KernelReport(report.seconds, report.compiled, report.loaded, report.cache,
+                        build_aot())
 
 
 def ensure_compiled() -> KernelReport:
-    """Load every kernel signature of the manifest (compile any the cache lacks)."""
+    """Load every kernel signature of the manifest (compile any the cache lacks).
+
+    With the AOT kernels there is nothing to load: the report says so (no numba import).
+    """
+    if _aot.active():
+        return KernelReport(0.0, 0, _aot.install(), str(_aot.aot_dir()), _aot.status())
     t0, before = time.perf_counter(), kernel_stats()
     sigs = _read_manifest()
     dispatchers = _dispatchers()
     if sigs is None or not set(sigs) <= set(dispatchers):
-        return compile_all()
+        report = compile_all(aot=False)
+        return KernelReport(report.seconds, report.compiled, report.loaded, report.cache,
+                            _aot.status())
     for name, signatures in sigs.items():
         for sig in signatures:
             try:
                 dispatchers[name].compile(sig)
             except Exception:  # noqa: BLE001 - a signature that no longer fits: it
-                return compile_all()  # compiles on first use; rebuild the manifest
-    return _report(t0, before)
+                return compile_all(aot=False)  # compiles on first use; new manifest
+    report = _report(t0, before)
+    return KernelReport(report.seconds, report.compiled, report.loaded, report.cache,
+                        _aot.status())

@@ -183,8 +183,8 @@ class ThreatPlannerNode(Node):
         cache this fills, so neither the first request nor the first picture waits on it.
         """
         report = ensure_compiled()
-        log = self.get_logger().info if report.compiled else self.get_logger().debug
-        log(f'kernels: {report.line()}')
+        # One info line: which kernels plans use (AOT or JIT, and why), what loading took.
+        self.get_logger().info(f'kernels: {report.line()}')
 
     def _log_ready(self) -> None:
         settings = self._state.settings

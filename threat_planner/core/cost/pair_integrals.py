@@ -15,18 +15,28 @@ ends lie along the line:
 :func:`_direct` made the 40-segment, 20-threat J and gradient 35.7 -> 22.2 us (the two atan
 and about ten divisions per pair of :func:`_far` before; ``bench/results/
 profile_kernel.txt``). Importing this module points numba's cache at
-:mod:`._numba_cache`; without numba the functions run as plain Python (correct, slow).
+:mod:`._numba_cache`, or, where an AOT module fits these sources, makes ``njit`` record
+the functions for :mod:`._aot`; without numba they run as plain Python (correct, slow).
 """
 
 from __future__ import annotations
 
 import math
 
+from threat_planner.core import _aot
+
 try:
-    from numba import njit, prange
-    HAVE_NUMBA = True
-    from threat_planner.core import _numba_cache
-    _numba_cache.configure()
+    if _aot.module() is not None:
+        # The AOT module replaces the kernels (_aot.install): no numba import, plain
+        # functions recorded for it and for the lazily built JIT kernels of large problems.
+        HAVE_NUMBA = True
+        prange = range
+        njit = _aot.stub_njit
+    else:
+        from numba import njit, prange
+        HAVE_NUMBA = True
+        from threat_planner.core import _numba_cache
+        _numba_cache.configure()
 except ImportError:  # pragma: no cover - numba is in install_requires
     HAVE_NUMBA = False
     prange = range
