@@ -16,7 +16,7 @@ serial; the problems large enough for the parallel kernels go to JIT kernels bui
 lazily from the same functions (:func:`jit`, numba imported then; :func:`_route`).
 The exported functions check no argument type (a float32 or non-contiguous array is
 read as float64 C-contiguous memory): every Python call site passes the exported types,
-which ``test/core/test_aot_types.py`` checks over the bundled scenarios.
+which ``test/core/test_aot.py`` checks over the bundled scenarios (``aot_plans.py``).
 """
 
 from __future__ import annotations
