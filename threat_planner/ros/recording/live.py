@@ -60,7 +60,10 @@ class LiveResult:
 #: topics are taken by the node's executor in subscription order, not in publishing order,
 #: so back-to-back inputs (``plan --record`` writes them microseconds apart: start, goal,
 #: zones, terrain, threats) are spaced by this to reach the node in the recorded order.
-TOPIC_SWITCH_GAP_S = 0.05
+#: 50 ms was not enough under load: in a fresh clone's suite air_mixed_0's terrain (an
+#: Image) reached the node after the threats published 50 ms later, the plan named it, and
+#: the replay waited in vain for an answer naming the threats.
+TOPIC_SWITCH_GAP_S = 0.2
 
 
 def _normalise_ns(namespace: str) -> str:
