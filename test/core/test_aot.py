@@ -183,3 +183,10 @@ def test_the_kernel_helpers_import_no_numba_on_the_aot_path():
     assert out['numba'] is False and out['stats'] == [0, 0] and out['start'] == 'fork'
     assert out['line'].startswith('loaded 17 compiled kernels') and \
         '; AOT kernels loaded from' in out['line'], out['line']
+
+
+def test_the_aot_routing_threshold_is_the_jit_path_s_own():
+    """_aot sits below cost in the layers, so it keeps a copy of the JIT path's threshold
+    for its parallel kernels: the two must not drift apart."""
+    from threat_planner.core.cost.kernels import PARALLEL_PAIRS
+    assert _aot.PARALLEL_PAIRS == PARALLEL_PAIRS

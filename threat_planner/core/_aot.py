@@ -201,8 +201,8 @@ def jit() -> dict:
 
 
 #: Pairs from which the L-BFGS calls go to the lazily built JIT (parallel) kernels: the
-#: JIT path's own threshold (cost.kernels.PARALLEL_PAIRS; not imported: this module loads
-#: before it). Measured on 2 shared cores, random
+#: JIT path's own threshold (cost.kernels.PARALLEL_PAIRS, not imported: this module sits
+#: below cost; test_aot holds the two equal). Measured on 2 shared cores, random
 #: fields in a 1 km box, w 0.5, warm plan() median of 5 in one process, all serial AOT
 #: against AOT + lazy JIT above these: 20 threats (800 pairs: all AOT either way) the
 #: serial AOT is faster than JIT; 100 threats (4,000 pairs) 388/372 -> 314/349 ms;
