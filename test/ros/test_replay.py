@@ -297,6 +297,26 @@ def test_live_replay_drives_a_node_to_the_recorded_plans(client, tmp_path):
     assert float(live.plans[-1].values['J']) == pytest.approx(expected.j_replayed, rel=1e-12)
 
 
+def test_live_replay_counts_a_plan_that_took_every_input_as_the_answer():
+    from threat_planner.ros.recording.live import _answers_everything
+    ours = {('/n/threats', 5), ('/n/terrain', 4)}
+
+    def answer(seq, received, source='/n/terrain', stamp=4):
+        return {'input_seq': str(seq), 'inputs_received': str(received),
+                'input_source': source, 'input_stamp_ns': str(stamp)}
+    # The terrain reached the node after the last input (the threats) and the plan named
+    # it: every input of ours is in that plan.
+    assert _answers_everything(answer(7, 7), True, 7, ours)
+    assert _answers_everything(answer(8, 8, 'parameters', 0), True, 7, ours)
+    # Not yet: an input arrived after the plan's, or ours are not all counted, or the
+    # plan came before the last publish, or it names somebody else's input.
+    assert not _answers_everything(answer(6, 7), True, 7, ours)
+    assert not _answers_everything(answer(6, 6), True, 7, ours)
+    assert not _answers_everything(answer(7, 7), False, 7, ours)
+    assert not _answers_everything(answer(7, 7, '/other/threats', 5), True, 7, ours)
+    assert not _answers_everything(dict(answer(7, 7), input_seq='x'), True, 7, ours)
+
+
 def test_live_replay_without_a_node_exits_2():
     p = cli('replay', BAGS / 'ground.mcap', '--live', '--namespace', '/nobody',
             '--timeout', '2', env=ros_env(DOMAIN))

@@ -66,6 +66,10 @@ class LiveResult:
 TOPIC_SWITCH_GAP_S = 0.2
 
 
+#: Wait for a latched ``plan_info`` once its publisher is matched [s].
+LATCHED_GRACE_S = 0.1
+
+
 def _normalise_ns(namespace: str) -> str:
     return '/' + namespace.strip('/') if namespace.strip('/') else ''
 
@@ -77,6 +81,31 @@ def _retarget(name: str, old_ns: str, new_ns: Optional[str]) -> str:
     if old_ns and not name.startswith(old_ns + '/'):
         return name
     return _normalise_ns(new_ns) + name[len(old_ns):]
+
+
+def _key(values: Mapping[str, str]) -> Tuple[Optional[str], int]:
+    return values.get('input_source'), _count(values, 'input_stamp_ns')
+
+
+def _count(values: Mapping[str, str], key: str) -> int:
+    try:
+        return int(values.get(key, -1))
+    except ValueError:
+        return -1
+
+
+def _answers_everything(values: Mapping[str, str], after_last: bool, expected: int,
+                        ours) -> bool:
+    """Whether a ``plan_info`` answers every input the node has had, ours all among them.
+
+    The node numbers parameter sets and messages alike and names only the newest input a
+    plan took, so a plan that coalesced the recording's last input into a later one, or
+    took inputs that arrived out of order, still answers everything when its
+    ``input_seq`` is the node's ``inputs_received`` and that count includes all of ours.
+    """
+    seq = _count(values, 'input_seq')
+    return (after_last and seq >= expected and seq == _count(values, 'inputs_received')
+            and (_key(values) in ours or values.get('input_source') == PARAMETERS))
 
 
 def _wait(condition: Callable[[], bool], timeout: float) -> bool:
@@ -178,7 +207,8 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
                 cond.notify_all()
 
         from diagnostic_msgs.msg import DiagnosticArray
-        node.create_subscription(DiagnosticArray, f'{ns}/plan_info', on_info, LATCHED)
+        info_sub = node.create_subscription(DiagnosticArray, f'{ns}/plan_info', on_info,
+                                            LATCHED)
         publishers = {}
         for inp in bag.inputs:
             if inp.source != PARAMETERS and inp.source not in publishers:
@@ -200,6 +230,13 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
                     f'no subscriber on {pub.topic_name} within {connect_timeout:g} s: is the '
                     'planner node running, with the same ROS_DOMAIN_ID and namespace?')
         client = None
+        parameter_sets = 0
+        # The node's latched plan_info, if it has one, gives its input count before ours;
+        # it comes just after the match, so the count waits a moment for it.
+        if _wait(lambda: info_sub.get_publisher_count() > 0, connect_timeout):
+            time.sleep(LATCHED_GRACE_S)
+        with cond:
+            baseline = max((_count(a, 'inputs_received') for _, a in answers), default=0)
         if set_parameters:
             client = AsyncParameterClient(node, node_name)
             if not client.wait_for_services(timeout_sec=connect_timeout):
@@ -211,6 +248,7 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
             initial += [Parameter(k, value=v) for k, v in overrides.items()]
             if initial:
                 _set_parameters(client, initial, node_name, connect_timeout)
+                parameter_sets += 1
 
         started = time.monotonic()
         t0 = bag.inputs[0].log_time_ns
@@ -231,21 +269,24 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
                 if params:
                     _set_parameters(client, params, node_name, connect_timeout)
                     changes += 1
+                    parameter_sets += 1
             if progress is not None:
                 progress(n, len(bag.inputs))
+        last_published = time.monotonic()
+        ours = {(_retarget(i.source, bag.namespace, namespace), i.stamp_ns)
+                for i in bag.inputs if i.source != PARAMETERS}
+        expected = baseline + parameter_sets + sum(i.source != PARAMETERS for i in bag.inputs)
         last_answered = None
         if last_key is not None:
             def answered() -> bool:
                 with cond:
-                    return any((a.get('input_source'), int(a.get('input_stamp_ns', -1)))
-                               == last_key for _, a in answers)
+                    return any(_key(a) == last_key or _answers_everything(
+                        a, t >= last_published, expected, ours) for t, a in answers)
             last_answered = _wait(answered, wait)
         duration = time.monotonic() - started
-        ours = {(_retarget(i.source, bag.namespace, namespace), i.stamp_ns)
-                for i in bag.inputs if i.source != PARAMETERS}
         with cond:
             got = [a for t, a in answers
-                   if (a.get('input_source'), int(a.get('input_stamp_ns', -1))) in ours
+                   if _key(a) in ours
                    or (a.get('input_source') == PARAMETERS and t >= started)]
         published = sum(inp.source != PARAMETERS for inp in bag.inputs)
         return LiveResult(published, client is not None, changes, duration, got,
