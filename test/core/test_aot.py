@@ -134,6 +134,17 @@ def test_a_stale_or_corrupt_module_falls_back_to_jit(runs, both, damage):
     assert [out['J'], out['path']] == both[1]['plans'][ONE_KEY]
 
 
+def test_a_module_built_for_another_cpu_is_not_loaded(monkeypatch):
+    """The module is built for the host CPU, so its folder and stamp name that CPU."""
+    here = _aot.aot_dir()
+    assert _aot.tag().endswith('-cpu' + _aot.cpu_id()) and len(_aot.cpu_id()) == 8
+    assert _aot.load(here)[0] is not None
+    monkeypatch.setattr(_aot, 'cpu_id', lambda: 'deadbeef')
+    assert _aot.aot_dir() != here and _aot.load()[1].startswith('no AOT module')
+    module, why = _aot.load(here)          # copied into this CPU's folder by hand
+    assert module is None and why.startswith('stale AOT module') and 'cpu' in why, why
+
+
 def test_compile_builds_the_module_once_and_a_fresh_process_uses_it(runs, both):
     """The one AOT build of the suite (~60 s): into a copy of the cache without it."""
     procs, caches = runs

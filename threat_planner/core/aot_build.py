@@ -68,6 +68,7 @@ def build(outdir: Path | None = None) -> str:
         cc = CC(_aot.MODULE_NAME)
         cc.output_dir = str(work)
         cc.verbose = False
+        cc.target_cpu = 'host'  # as the JIT; the folder's tag names the CPU (_aot.cpu_id)
         for qual, sig in full.items():
             cc.export(_aot.symbol(qual), sig)(disp[qual].py_func)
         cc.compile()
