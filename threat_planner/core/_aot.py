@@ -75,7 +75,7 @@ def cpu_id() -> str:
     """Return 8 hex digits naming this CPU's model and instruction set.
 
     The module is built for the host CPU (``target_cpu='host'``, as numba's JIT does; the
-    generic target made warm plans ~15 % slower), so a cache folder shared by machines
+    generic target made warm plans ~10 % slower), so a cache folder shared by machines
     keeps one module per CPU, and a module built elsewhere is never loaded here. Linux
     reads ``/proc/cpuinfo`` (llvmlite would say it too, but costs 50 ms to import).
     """

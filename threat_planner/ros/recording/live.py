@@ -131,7 +131,9 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
     topics at least :data:`TOPIC_SWITCH_GAP_S` apart, so that they arrive in the recorded
     order). Messages go out
     as recorded, header stamps included, so the node's ``plan_info`` names them.
-    Finally it waits for the node to answer the last input the recording shows answered.
+    Finally it waits for the node to answer the last input the recording shows answered,
+    or for a plan that took every input the node has had, all of these counted (inputs
+    reordered on the way, or the last one coalesced into a later one, still answered).
 
     Parameters
     ----------
