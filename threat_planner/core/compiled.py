@@ -15,7 +15,7 @@ it runs the workload. ``threat-planner compile``, ``make venv`` and ``setup.py b
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import importlib
 import json
 import os
@@ -225,8 +225,7 @@ def compile_all(aot: bool | None = None) -> KernelReport:
         report = _report(t0, before)
     if not aot:
         return report
-    return KernelReport(report.seconds, report.compiled, report.loaded, report.cache,
-                        build_aot())
+    return replace(report, aot=build_aot())
 
 
 def ensure_compiled() -> KernelReport:
@@ -240,15 +239,11 @@ def ensure_compiled() -> KernelReport:
     sigs = _read_manifest()
     dispatchers = _dispatchers()
     if sigs is None or not set(sigs) <= set(dispatchers):
-        report = compile_all(aot=False)
-        return KernelReport(report.seconds, report.compiled, report.loaded, report.cache,
-                            _aot.status())
+        return replace(compile_all(aot=False), aot=_aot.status())
     for name, signatures in sigs.items():
         for sig in signatures:
             try:
                 dispatchers[name].compile(sig)
             except Exception:  # noqa: BLE001 - a signature that no longer fits: it
                 return compile_all(aot=False)  # compiles on first use; new manifest
-    report = _report(t0, before)
-    return KernelReport(report.seconds, report.compiled, report.loaded, report.cache,
-                        _aot.status())
+    return replace(_report(t0, before), aot=_aot.status())

@@ -277,7 +277,8 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
         last_published = time.monotonic()
         ours = {(_retarget(i.source, bag.namespace, namespace), i.stamp_ns)
                 for i in bag.inputs if i.source != PARAMETERS}
-        expected = baseline + parameter_sets + sum(i.source != PARAMETERS for i in bag.inputs)
+        published = sum(i.source != PARAMETERS for i in bag.inputs)
+        expected = baseline + parameter_sets + published
         last_answered = None
         if last_key is not None:
             def answered() -> bool:
@@ -290,7 +291,6 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
             got = [a for t, a in answers
                    if _key(a) in ours
                    or (a.get('input_source') == PARAMETERS and t >= started)]
-        published = sum(inp.source != PARAMETERS for inp in bag.inputs)
         return LiveResult(published, client is not None, changes, duration, got,
                           last_answered, ns, node_name)
     finally:
