@@ -95,8 +95,8 @@ setup(
     entry_points={
         'console_scripts': [
             'threat-planner = threat_planner.cli.main:console',
-            'planner_node = threat_planner.ros.node:main',
-            'planner_lifecycle_node = threat_planner.ros.lifecycle:main',
+            'planner_node = threat_planner.ros.entry:planner_node',
+            'planner_lifecycle_node = threat_planner.ros.entry:planner_lifecycle_node',
             'threat_publisher = threat_planner.ros.publisher:main',
             'threat_planner_demo = threat_planner.cli.demo:main',
         ],

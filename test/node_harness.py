@@ -110,7 +110,7 @@ def planner_command(namespace: str = '', params: Optional[dict] = None,
                     params_file: Optional[Path] = REPO / 'config' / 'planner.yaml',
                     executable: Optional[Sequence[str]] = None) -> list[str]:
     """Command line of a planner node with a namespace, a params file and overrides."""
-    cmd = list(executable or [PYTHON, '-m', 'threat_planner.ros.node'])
+    cmd = list(executable or [PYTHON, '-m', 'threat_planner.ros.entry', 'planner_node'])
     cmd.append('--ros-args')
     if namespace:
         cmd += ['-r', f'__ns:={namespace}']

@@ -66,6 +66,42 @@ def test_the_probe_sees_ros_when_it_is_loaded():
     assert 'rclpy' in p.stdout
 
 
+HEAVY_PROBE = r"""
+import importlib, json, sys
+importlib.import_module(sys.argv[1])
+print(json.dumps(sorted({m.split('.')[0] for m in sys.modules} & {
+    'numpy', 'scipy', 'numba', 'rclpy', 'mcap', 'yaml', 'nav_msgs'})))
+"""
+
+
+@pytest.mark.parametrize('module, heavy', [
+    ('threat_planner', []),                    # core's names load on first use
+    ('threat_planner.ros.entry', []),          # what a spawned plan process runs first
+    ('threat_planner.ros.worker', []),
+    ('threat_planner.bag.cdr', []),            # a plan process's serialiser: no mcap
+    ('threat_planner.ros.node', ['nav_msgs', 'numpy', 'rclpy', 'scipy', 'yaml']),
+])
+def test_the_executables_start_their_plan_process_before_the_heavy_imports(module, heavy):
+    """`planner_node` spawns its plan process from :mod:`threat_planner.ros.entry`, whose
+    imports (and a spawned child's re-run of the script) must stay free of numpy, scipy and
+    rclpy; the last case shows that the probe sees them."""
+    p = subprocess.run([sys.executable, '-c', HEAVY_PROBE, module], cwd=ROOT,
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == str(heavy).replace("'", '"'), p.stdout
+
+
+def test_the_lazy_package_names_are_the_core_s_and_the_bag_s():
+    import threat_planner
+    from threat_planner import bag, core
+    assert all(getattr(threat_planner, n) is getattr(core, n) for n in threat_planner.__all__
+               if n in core.__all__) and 'plan' in dir(threat_planner)
+    from threat_planner.bag import writer
+    assert bag.McapRecorder is writer.McapRecorder and set(bag.__all__) <= set(dir(bag))
+    with pytest.raises(AttributeError, match='no attribute .nope.'):
+        bag.nope  # noqa: B018
+
+
 def test_no_module_is_over_450_lines():
     """Every Python file git tracks: the package, test, bench, examples, launch, setup.py."""
     p = subprocess.run(['git', 'ls-files', '-z', '--', '*.py'], cwd=ROOT, capture_output=True,

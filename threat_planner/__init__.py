@@ -4,13 +4,31 @@ The public API: :func:`plan` a path through a :class:`ThreatField` inside a :cla
 with a :class:`PlannerConfig`, getting a :class:`PlanResult`; :func:`load_scenario` reads a
 scenario file. Sub-packages: ``core`` (the method, no ROS), ``ros`` (the node and message
 conversions), ``bag`` (MCAP recording and replay), ``cli`` (``threat-planner``).
+
+The names from ``core`` load on first use (PEP 562): ``import threat_planner.ros.entry``
+must not pay numpy's and scipy's imports, so a node's plan process can start first.
 """
 
-from threat_planner.core import (Box, Cost, load_scenario, path_cost, plan, PlannerConfig,
-                                 PlanResult, Scenario, ThreatField)
+import importlib
+
 from threat_planner.errors import (InputError, PlanningError, RecordingError, ScenarioError,
                                    ThreatPlannerError)
+
+_FROM_CORE = ('Box', 'Cost', 'PlanResult', 'PlannerConfig', 'Scenario', 'ThreatField',
+              'load_scenario', 'path_cost', 'plan')
 
 __all__ = ['Box', 'Cost', 'InputError', 'PlanResult', 'PlannerConfig', 'PlanningError',
            'RecordingError', 'Scenario', 'ScenarioError', 'ThreatField', 'ThreatPlannerError',
            'load_scenario', 'path_cost', 'plan']
+
+
+def __getattr__(name: str):
+    if name in _FROM_CORE:
+        value = getattr(importlib.import_module('threat_planner.core'), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+
+
+def __dir__() -> list:
+    return sorted(set(globals()) | set(__all__))

@@ -21,7 +21,7 @@ from threat_planner.core.inputs.scenario import load_scenario
 DOMAIN = domain_id(45)
 SCENARIO = load_scenario(REPO / 'test' / 'data' / 'uniform20_0.yaml')
 NS = '/lc'
-LIFECYCLE = [PYTHON, '-m', 'threat_planner.ros.lifecycle']
+LIFECYCLE = [PYTHON, '-m', 'threat_planner.ros.entry', 'planner_lifecycle_node']
 
 
 def call(client, srv_type, name, request, timeout=15.0, attempts=1):

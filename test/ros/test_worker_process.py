@@ -97,34 +97,96 @@ def test_timeout_cancel_and_stop_kill_the_plan():
         worker.stop()
 
 
-def test_the_spare_starts_once_the_first_child_has_its_kernels(monkeypatch):
-    """Started with the first child, the spare's imports competed with the first child's
-    (and the node's) on two cores; it starts once the first child is ready, and a kill
-    still hands over to it."""
+def _watch_processes(monkeypatch):
+    """Record every plan process made, and which of the earlier ones were ready then."""
     from threat_planner.ros import worker as module
     made, ready_then = [], []
 
     class Watched(module._PlanProcess):
-        def __init__(self):
+        def __init__(self, held=False):
             ready_then.append([p.ready.is_set() for p in made])
-            super().__init__()
+            super().__init__(held)
             made.append(self)
     monkeypatch.setattr(module, '_PlanProcess', Watched)
+    return made, ready_then
+
+
+def _wait(condition, timeout=60.0):
+    deadline = time.monotonic() + timeout
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return condition()
+
+
+def test_the_spare_starts_once_the_first_child_has_its_kernels_and_its_first_plan(
+        monkeypatch):
+    """Started with the first child, the spare's imports competed with the first child's
+    (and the node's) on two cores, and beside the first plan they made it 2-3x slower; it
+    starts once the first plan has ended, and a kill still hands over to it."""
+    made, ready_then = _watch_processes(monkeypatch)
     phases = Phases()
     worker = ProcessPlanWorker(phases)
     try:
-        deadline = time.monotonic() + 60.0
-        while len(made) < 2 and time.monotonic() < deadline:
-            time.sleep(0.01)
-        first, spare = made[:2]
+        first = made[0]
+        assert first.ready.wait(60.0)
+        time.sleep(0.5)
+        assert len(made) == 1 and worker._spare is None   # SPARE_IDLE_S is 3 s
+        worker.submit(request(1, method='paper'))
+        phases.wait(lambda p, o: p == 'done')
+        assert _wait(lambda: len(made) == 2)
+        spare = made[1]
         assert ready_then[:2] == [[], [True]]
         assert worker._child is first and worker._spare is spare
-        worker.submit(request(1, n_points=5000, max_plan_time_s=0.5))
+        worker.submit(request(2, n_points=5000, max_plan_time_s=0.5))
         phases.wait(lambda p, o: p == 'timeout')
         # The loaded spare took over, and a new spare is on its way at once.
         assert worker._child is spare and worker._spare is made[2] and len(made) == 3
-        worker.submit(request(2, method='paper'))
-        assert phases.wait(lambda p, o: p == 'done').request.seq == 2
+        worker.submit(request(3, method='paper'))
+        assert phases.wait(lambda p, o: p.startswith('done') and o.request.seq == 3)
     finally:
         assert worker.stop()
     assert all(p.proc.exitcode is not None for p in made)
+
+
+def test_an_idle_worker_starts_its_spare_after_spare_idle_s(monkeypatch):
+    from threat_planner.ros import worker as module
+    monkeypatch.setattr(module, 'SPARE_IDLE_S', 0.2)
+    made, _ = _watch_processes(monkeypatch)
+    worker = ProcessPlanWorker(Phases())
+    try:
+        assert _wait(lambda: len(made) == 2) and worker._spare is made[1]
+    finally:
+        assert worker.stop()
+
+
+def test_a_prestarted_child_waits_for_the_worker_before_it_loads_the_kernels():
+    """`planner_node` spawns its plan process before its own imports (ros/entry.py); the
+    child loads the kernels only once the node's worker takes it, after a cold cache was
+    compiled in the node; a child that died meanwhile is replaced."""
+    from threat_planner.ros import worker as module
+    module.prestart()
+    held = module._PRESTARTED
+    worker = None
+    try:
+        module.prestart()
+        assert module._PRESTARTED is held and held.proc.is_alive()
+        assert not held.ready.wait(2.0)          # imported by now, but held
+        phases = Phases()
+        worker = ProcessPlanWorker(phases)
+        assert worker._child is held and module._PRESTARTED is None
+        assert held.ready.wait(60.0)
+        worker.submit(request(1, method='paper'))
+        assert phases.wait(lambda p, o: p == 'done').request.seq == 1
+    finally:
+        if worker is not None:
+            assert worker.stop()
+        held.kill()
+    module.prestart()
+    dead = module._PRESTARTED
+    dead.proc.kill()
+    dead.proc.join(10.0)
+    worker = ProcessPlanWorker(Phases())
+    try:
+        assert worker._child is not dead and worker._child.ready.wait(60.0)
+    finally:
+        assert worker.stop()

@@ -8,15 +8,34 @@ text, ``cdr`` channels carrying ``offered_qos_profiles``, zstd-compressed chunks
 :mod:`.cdr` (CDR encoding), :mod:`.metadata` (rosbag2's ``metadata.yaml``), :mod:`.repair`
 (salvage a cut bag). Storage only: it imports nothing of the ROS edge; the tools that run
 it (record, replay, live) are in :mod:`threat_planner.ros.recording`.
+
+The names below load on first use (PEP 562): a plan process that needs only :mod:`.cdr`
+does not pay for mcap and the message definitions (65 ms of a node's start-up).
 """
 
-from threat_planner.bag.definitions import (deserialize, get_message_class, message_definition,
-                                            message_type_name, msg_dependencies)
-from threat_planner.bag.qos import INPUT_QOS, LATCHED_QOS, TopicQos
-from threat_planner.bag.reader import (read_messages, read_ros_messages, RecordedMessage,
-                                       recorded_topics)
-from threat_planner.bag.writer import McapRecorder
+import importlib
+
+_HOMES = {
+    'deserialize': 'definitions', 'get_message_class': 'definitions',
+    'message_definition': 'definitions', 'message_type_name': 'definitions',
+    'msg_dependencies': 'definitions', 'INPUT_QOS': 'qos', 'LATCHED_QOS': 'qos',
+    'TopicQos': 'qos', 'read_messages': 'reader', 'read_ros_messages': 'reader',
+    'RecordedMessage': 'reader', 'recorded_topics': 'reader', 'McapRecorder': 'writer',
+}
 
 __all__ = ['INPUT_QOS', 'LATCHED_QOS', 'McapRecorder', 'RecordedMessage', 'TopicQos',
            'deserialize', 'get_message_class', 'message_definition', 'message_type_name',
            'msg_dependencies', 'read_messages', 'read_ros_messages', 'recorded_topics']
+
+
+def __getattr__(name: str):
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    value = getattr(importlib.import_module(f'{__name__}.{home}'), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list:
+    return sorted(set(globals()) | set(__all__))

@@ -39,7 +39,7 @@ def _ros_args(params: dict[str, object]) -> list[str]:
 def _children(args: argparse.Namespace) -> list[subprocess.Popen]:
     """Start the planner and the publisher as ``ros2 run`` would start them."""
     env = dict(os.environ, PYTHONUNBUFFERED='1')
-    planner = [sys.executable, '-m', 'threat_planner.ros.node', '--ros-args']
+    planner = [sys.executable, '-m', 'threat_planner.ros.entry', 'planner_node', '--ros-args']
     if Path(args.params).exists():
         planner += ['--params-file', str(args.params)]
     planner += _ros_args({'method': args.method})[1:]

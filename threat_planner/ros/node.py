@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import collections
 import threading
-from typing import Callable, Optional, Sequence
+from typing import Callable, Optional, Sequence, TYPE_CHECKING
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
@@ -61,7 +61,6 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image, NavSatFix, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
-from threat_planner.bag import McapRecorder
 from threat_planner.core.compiled import ensure_compiled, kernels_cached
 from threat_planner.errors import InputError, RecordingError
 from threat_planner.ros.conversions import plan_info_msg
@@ -75,6 +74,8 @@ from threat_planner.ros.parameters import declare_all, PARAMETER_DEFAULTS, PLANN
 from threat_planner.ros.plan_service import PlanService
 from threat_planner.ros.process import run_node
 from threat_planner.ros.worker import ProcessPlanWorker
+if TYPE_CHECKING:  # mcap loads when a recording opens, not at every start
+    from threat_planner.bag import McapRecorder
 
 __all__ = ['ThreatPlannerNode', 'main']
 
@@ -117,11 +118,7 @@ class ThreatPlannerNode(Node):
     def _configure(self) -> None:
         """Validate the parameters into the state, start the worker, open the recording."""
         self._state = InputState.from_parameters(self._parameter_values())
-        self._seq = 0
-        self._received = 0
-        self._rejected = 0
-        self._skipped = 0
-        self._plans = 0
+        self._seq = self._received = self._rejected = self._skipped = self._plans = 0
         self._staged: Optional[tuple[InputState, Optional[McapRecorder]]] = None
         self._recorder: Optional[McapRecorder] = None
         self._outcomes: collections.deque[tuple[str, PlanOutcome]] = collections.deque()
@@ -255,6 +252,7 @@ class ThreatPlannerNode(Node):
     # -- recording -------------------------------------------------------------------
 
     def _open_recorder(self, target: str) -> McapRecorder:
+        from threat_planner.bag import McapRecorder
         recorder = McapRecorder(target, prefix=NODE_NAME)
         try:
             # From the interface, not the endpoints: a managed node records from configure

@@ -1,0 +1,42 @@
+"""The executables ``planner_node`` and ``planner_lifecycle_node``: plan process first.
+
+Each starts the node's first plan process (:func:`threat_planner.ros.worker.prestart`)
+before it imports rclpy, numpy and scipy, so the child's imports run beside the node's on
+the second core and the first picture finds the child ready sooner. This module imports
+nothing heavy: a spawned child runs the executable's script again, and pays only this.
+
+``python -m threat_planner.ros.entry planner_node [--ros-args ...]`` runs the same as
+``ros2 run threat_planner planner_node``.
+"""
+
+import sys
+from typing import Optional
+
+__all__ = ['planner_lifecycle_node', 'planner_node']
+
+
+def planner_node(args: Optional[list[str]] = None) -> int:
+    """Run :class:`~threat_planner.ros.node.ThreatPlannerNode`; see its ``main``."""
+    from threat_planner.ros.worker import prestart
+    prestart()
+    from threat_planner.ros.node import main
+    return main(args)
+
+
+def planner_lifecycle_node(args: Optional[list[str]] = None) -> int:
+    """Run the managed node; its plan process waits, imported, for ``configure``."""
+    from threat_planner.ros.worker import prestart
+    prestart()
+    from threat_planner.ros.lifecycle import main
+    return main(args)
+
+
+_EXECUTABLES = {'planner_node': planner_node, 'planner_lifecycle_node': planner_lifecycle_node}
+
+if __name__ == '__main__':
+    if len(sys.argv) < 2 or sys.argv[1] not in _EXECUTABLES:
+        print(f'usage: python -m threat_planner.ros.entry {{{",".join(_EXECUTABLES)}}} '
+              '[--ros-args ...]', file=sys.stderr)
+        raise SystemExit(2)
+    name = sys.argv.pop(1)
+    raise SystemExit(_EXECUTABLES[name]())
