@@ -38,6 +38,8 @@ SUITES: dict[str, tuple[str, str, str]] = {
                                 'write the six airspace scenarios into test/data/'),
     'node_latency': ('bench.suites.node_latency', 'main',
                      'publish a threat picture, receive path: the node end to end'),
+    'node_start': ('bench.suites.node_start', 'main',
+                   'planner_node of two checkouts started in turns: seconds to its first path'),
     'paper_methods': ('bench.suites.paper_methods', 'main',
                       'paper and improved at 20 threats, beside a base checkout'),
     'perturbation': ('bench.suites.perturbation', 'main',
