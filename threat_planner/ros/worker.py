@@ -210,7 +210,7 @@ def prestart() -> None:
     """Start the first plan process now, before this process imports rclpy and the core.
 
     A node's executable calls this first (:mod:`threat_planner.ros.entry`): the child's
-    imports (~0.5 s) then run beside the node's own on a second core instead of after them.
+    imports (~0.7 s) then run beside the node's own on a second core instead of after them.
     The child loads the kernels only when the node's worker takes it (the node compiles a
     cold cache first). A child never taken ends with this process (it is a daemon).
     """
