@@ -9,26 +9,14 @@ The names from ``core`` load on first use (PEP 562): ``import threat_planner.ros
 must not pay numpy's and scipy's imports, so a node's plan process can start first.
 """
 
-import importlib
-
+from threat_planner._lazy import lazy_names
 from threat_planner.errors import (InputError, PlanningError, RecordingError, ScenarioError,
                                    ThreatPlannerError)
-
-_FROM_CORE = ('Box', 'Cost', 'PlanResult', 'PlannerConfig', 'Scenario', 'ThreatField',
-              'load_scenario', 'path_cost', 'plan')
 
 __all__ = ['Box', 'Cost', 'InputError', 'PlanResult', 'PlannerConfig', 'PlanningError',
            'RecordingError', 'Scenario', 'ScenarioError', 'ThreatField', 'ThreatPlannerError',
            'load_scenario', 'path_cost', 'plan']
 
-
-def __getattr__(name: str):
-    if name in _FROM_CORE:
-        value = getattr(importlib.import_module('threat_planner.core'), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
-
-
-def __dir__() -> list:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_names(__name__, dict.fromkeys(
+    ('Box', 'Cost', 'PlanResult', 'PlannerConfig', 'Scenario', 'ThreatField', 'load_scenario',
+     'path_cost', 'plan'), 'threat_planner.core'), __all__)

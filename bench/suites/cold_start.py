@@ -118,17 +118,6 @@ def measure_cli(work: Path, repeats: int) -> dict:
     return out
 
 
-def _log_stamp(log: Path, text: str) -> float | None:
-    """Return the ROS log stamp [s since the epoch] of the first line holding `text`."""
-    for line in log.read_text(errors='replace').splitlines():
-        if text in line and line.startswith('[') and '] [' in line:
-            try:
-                return float(line.split('] [', 2)[1].split(']', 1)[0])
-            except ValueError:
-                continue
-    return None
-
-
 def _sourced_env(install: Path, env: dict) -> dict:
     """The environment after ``. install/local_setup.sh``, as a user's sourced shell has it.
 
@@ -151,7 +140,7 @@ def _first_path(install: Path, cache: Path, work: Path, tag: str,
     waits for the next periodic one). The publisher starts with the node, or with
     `publisher_first` 3 s before it (a threat source already running).
     """
-    from bench.toolkit.node import domain_id, RosClient, stop_process
+    from bench.toolkit.node import domain_id, log_stamp, RosClient, stop_process
     from nav_msgs.msg import Path as PathMsg
     from node_harness import ros_env
     domain = domain_id(120, 40)
@@ -191,7 +180,7 @@ def _first_path(install: Path, cache: Path, work: Path, tag: str,
             stop_process(p)
         client.close()
     for key, text in (('ready_s', ']: ready: '), ('published_s', ']: plan for input #')):
-        stamp = _log_stamp(node_log, text)
+        stamp = log_stamp(node_log, text)
         out[key] = float('nan') if stamp is None else stamp - epoch0
     return out
 

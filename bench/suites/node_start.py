@@ -22,23 +22,17 @@ import subprocess
 import sys
 import time
 
+from bench.toolkit.checkouts import short_commit
 from bench.toolkit.repo import DATA, machine, RESULTS, ROOT
 
 KEYS = (('kernels_s', ']: kernels: '), ('ready_s', ']: ready: '),
         ('first_path_s', ']: plan for input #'))
 
 
-def _stamp(log: Path, text: str) -> float:
-    for line in log.read_text(errors='replace').splitlines():
-        if text in line and line.startswith('[') and '] [' in line:
-            return float(line.split('] [', 2)[1].split(']', 1)[0])
-    return float('nan')
-
-
 def start_once(tree: Path, work: Path, domain: int, publisher_first: bool) -> dict:
     """Start the node of `tree` and a publisher; return the seconds of :data:`KEYS`."""
-    sys.path.insert(0, str(ROOT / 'test'))
-    from node_harness import ros_env, stop_process
+    from bench.toolkit.node import log_stamp, stop_process   # puts test/ on the path
+    from node_harness import ros_env
     env = ros_env(domain)
     env['PYTHONPATH'] = os.pathsep.join([str(tree), env['PYTHONPATH']])
     has_entry = (tree / 'threat_planner' / 'ros' / 'entry.py').exists()
@@ -68,12 +62,8 @@ def start_once(tree: Path, work: Path, domain: int, publisher_first: bool) -> di
     finally:
         for p in reversed(procs):
             stop_process(p)
-    return {key: _stamp(log, text) - t0 for key, text in KEYS}
-
-
-def _commit(tree: Path) -> str:
-    return subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=tree,
-                          capture_output=True, text=True).stdout.strip()
+    stamps = {key: log_stamp(log, text) for key, text in KEYS}
+    return {key: float('nan') if t is None else t - t0 for key, t in stamps.items()}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -101,8 +91,9 @@ def main(argv: list[str] | None = None) -> int:
     when = 'started 3 s before the node' if args.publisher_first else 'started with the node'
     lines = ['# Node start, side by side', '',
              f'`python -m bench node_start` on {time.strftime("%Y-%m-%d %H:%M")}: before = '
-             f'`{_commit(trees["before"])}`, after = `{_commit(ROOT)}`, {args.repeats} starts '
-             f'each in turns, the publisher {when}; {machine()}, load average at the end '
+             f'`{short_commit(trees["before"])}`, after = `{short_commit(ROOT)}`, '
+             f'{args.repeats} starts each in turns, the publisher {when}; {machine()}, load '
+             'average at the end '
              + ', '.join(f'{x:.1f}' for x in os.getloadavg()) + '. Seconds from the start of '
              'the node process (medians).', '',
              '| checkout | kernels line | ready | first path | first paths (each start) |',

@@ -25,8 +25,9 @@ if str(ROOT / 'test') not in sys.path:
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from nav_msgs.msg import Path as PathMsg  # noqa: E402
-from node_harness import (cloud, domain_id, info, LATCHED, planner_command, pose,  # noqa: E402
-                          PYTHON, RosClient, start_process, stop_process, VOLATILE)
+from node_harness import (cloud, domain_id, info, LATCHED, LATCHED_LOG,  # noqa: E402
+                          planner_command, pose, PYTHON, RosClient, start_process,
+                          stop_process, VOLATILE)
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
@@ -35,10 +36,22 @@ from sensor_msgs.msg import PointCloud2  # noqa: E402
 from threat_planner.core.inputs.scenario import Scenario  # noqa: E402
 from threat_planner.ros.conversions import ns_to_stamp  # noqa: E402
 
-__all__ = ['cloud', 'domain_id', 'info', 'jitter', 'LATCHED', 'NodeProcess', 'ParameterProbe',
-           'planner_command', 'pose', 'PYTHON', 'RosClient', 'ros_session', 'round_trip',
-           'scenario_params', 'STAMP0_NS', 'start_process', 'stop_process',
-           'subscribe_answers', 'VOLATILE']
+__all__ = ['cloud', 'domain_id', 'info', 'jitter', 'LATCHED', 'LATCHED_LOG', 'log_stamp',
+           'NodeProcess', 'ParameterProbe', 'planner_command', 'pose', 'PYTHON', 'RosClient',
+           'ros_session', 'round_trip', 'scenario_params', 'STAMP0_NS', 'start_process',
+           'stop_process', 'subscribe_answers', 'VOLATILE']
+
+
+def log_stamp(log: Path, text: str) -> float | None:
+    """Return the ROS log stamp [s since the epoch] of the first line holding `text`."""
+    for line in log.read_text(errors='replace').splitlines():
+        if text in line and line.startswith('[') and '] [' in line:
+            try:
+                return float(line.split('] [', 2)[1].split(']', 1)[0])
+            except ValueError:
+                continue
+    return None
+
 
 #: Stamp of the first counted input of a stream [ns]; later ones count up from it.
 STAMP0_NS = 1_000 * 10**9

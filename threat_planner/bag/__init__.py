@@ -13,29 +13,16 @@ The names below load on first use (PEP 562): a plan process that needs only :mod
 does not pay for mcap and the message definitions (65 ms of a node's start-up).
 """
 
-import importlib
-
-_HOMES = {
-    'deserialize': 'definitions', 'get_message_class': 'definitions',
-    'message_definition': 'definitions', 'message_type_name': 'definitions',
-    'msg_dependencies': 'definitions', 'INPUT_QOS': 'qos', 'LATCHED_QOS': 'qos',
-    'TopicQos': 'qos', 'read_messages': 'reader', 'read_ros_messages': 'reader',
-    'RecordedMessage': 'reader', 'recorded_topics': 'reader', 'McapRecorder': 'writer',
-}
+from threat_planner._lazy import lazy_names
 
 __all__ = ['INPUT_QOS', 'LATCHED_QOS', 'McapRecorder', 'RecordedMessage', 'TopicQos',
            'deserialize', 'get_message_class', 'message_definition', 'message_type_name',
            'msg_dependencies', 'read_messages', 'read_ros_messages', 'recorded_topics']
 
-
-def __getattr__(name: str):
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
-    value = getattr(importlib.import_module(f'{__name__}.{home}'), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_names(__name__, {
+    **dict.fromkeys(('deserialize', 'get_message_class', 'message_definition',
+                     'message_type_name', 'msg_dependencies'), f'{__name__}.definitions'),
+    **dict.fromkeys(('INPUT_QOS', 'LATCHED_QOS', 'TopicQos'), f'{__name__}.qos'),
+    **dict.fromkeys(('read_messages', 'read_ros_messages', 'RecordedMessage',
+                     'recorded_topics'), f'{__name__}.reader'),
+    'McapRecorder': f'{__name__}.writer'}, __all__)

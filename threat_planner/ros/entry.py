@@ -9,26 +9,27 @@ nothing heavy: a spawned child runs the executable's script again, and pays only
 ``ros2 run threat_planner planner_node``.
 """
 
+import importlib
 import sys
 from typing import Optional
 
 __all__ = ['planner_lifecycle_node', 'planner_node']
 
 
-def planner_node(args: Optional[list[str]] = None) -> int:
-    """Run :class:`~threat_planner.ros.node.ThreatPlannerNode`; see its ``main``."""
+def _run(node_module: str, args: Optional[list[str]]) -> int:
     from threat_planner.ros.worker import prestart
     prestart()
-    from threat_planner.ros.node import main
-    return main(args)
+    return importlib.import_module(node_module).main(args)
+
+
+def planner_node(args: Optional[list[str]] = None) -> int:
+    """Run :class:`~threat_planner.ros.node.ThreatPlannerNode`; see its ``main``."""
+    return _run('threat_planner.ros.node', args)
 
 
 def planner_lifecycle_node(args: Optional[list[str]] = None) -> int:
     """Run the managed node; its plan process waits, imported, for ``configure``."""
-    from threat_planner.ros.worker import prestart
-    prestart()
-    from threat_planner.ros.lifecycle import main
-    return main(args)
+    return _run('threat_planner.ros.lifecycle', args)
 
 
 _EXECUTABLES = {'planner_node': planner_node, 'planner_lifecycle_node': planner_lifecycle_node}
