@@ -38,6 +38,7 @@ def client():
     c.close()
 
 
+@pytest.mark.alone
 def test_short_flood_is_coalesced_without_backlog(client, tmp_path):
     r = flood.run_flood(client, SMALL, rate=100.0, seconds=5.0,
                         log_path=tmp_path / 'node.log', ns='/ci_flood')
@@ -78,6 +79,7 @@ def test_kill_while_recording_keeps_flushed_chunks(client, tmp_path):
     assert r['ok']
 
 
+@pytest.mark.alone
 def test_sigint_during_long_plan_exits_within_1s(client, tmp_path: Path):
     r = faults.sigint_during_long_plan(client, tmp_path, faults.random_scenario(10000),
                                        ns='/ci_sigint')
