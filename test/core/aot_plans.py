@@ -5,8 +5,8 @@ in a shim comparing ``numba.typeof`` of each argument with the signature the mod
 built for, and every other kernel function in one that records a call from Python (it
 would run as plain Python on the AOT path). The bundled scenarios at w 0.2/0.5/0.8,
 limits on and off, warm replans of moved threats (uniform20_0, air_mixed_0), the
-airspace scenarios at w 0.5 without limits; the 300-threat one (the parallel paths) without limits at
-w 0.5, last.
+airspace scenarios at w 0.5 without limits; the 300-threat one (the parallel paths)
+without limits at w 0.5, last.
 """
 
 import glob
