@@ -38,9 +38,9 @@ demo: venv
 	$(BIN)/threat_planner_demo --scenario test/data/uniform20_0.yaml --figure demo_out/last_plan.png
 
 # Tests that measure a rate or a deadline (marked `alone`) first, by themselves: beside
-# another worker's node tests a 100 Hz flood lost 11 % of its pictures in one CI run. Then
-# the rest in two workers (pytest-xdist), a test file each: node tests mostly wait on DDS
-# and child processes, so the second core works meanwhile (this 2-core machine: 550 s -> 400 s).
+# another worker's node tests a 100 Hz flood lost 11 % of its pictures in one CI run.
+# Then the rest in two workers (pytest-xdist), a test file each: node tests mostly wait
+# on DDS and child processes, so the second core works meanwhile (550 s -> 400 s here).
 TEST_WORKERS ?= 2
 test: venv
 	$(BIN)/python -m pytest -q -m alone
