@@ -156,8 +156,13 @@ def _brute_masked(a, b, radar, f, terrain, n=2001, sight=801):
     u = np.linspace(0, 1, sight)
     line = radar + u[None, :, None] * (pts - radar)[:, None]
     seen = np.all(line[..., 2] - terrain.height(line[..., :2]) >= -1e-9, axis=1)
-    g = f / np.sum((pts - radar) ** 2, axis=1) ** 2 * seen
-    return np.trapezoid(g, s) * np.linalg.norm(b - a), seen
+    full = f / np.sum((pts - radar) ** 2, axis=1) ** 2
+    length = np.linalg.norm(b - a)
+    # Where the sight changes between two samples the trapezoid rule is off by up to one
+    # step of the unmasked integrand: its error bound, one term per shadow edge.
+    edges = np.flatnonzero(seen[1:] != seen[:-1])
+    edge_error = np.sum(np.maximum(full[edges], full[edges + 1])) * (s[1] - s[0]) * length
+    return np.trapezoid(full * seen, s) * length, seen, edge_error
 
 
 def test_masked_cost_matches_brute_force_line_of_sight_quadrature():
@@ -165,17 +170,20 @@ def test_masked_cost_matches_brute_force_line_of_sight_quadrature():
     xx, yy = np.meshgrid(x, x)
     h = 80 * np.exp(-((xx - 200) / 40) ** 2) + 10 * np.sin(yy / 60)
     ter = Terrain.from_arrays([0, 0], 25.0, h, 0.0, True)
+    # Its own draws, whatever ran before it in this process (the module's RNG gave, after
+    # another order of tests under pytest-xdist, a case where the quadrature alone was
+    # 0.5 % off: 3122.78 against 3139.00; 40001 x 4001 samples put it within 2e-4).
+    rng = np.random.default_rng(163)
     checked_partial = 0
     for _ in range(8):
-        radar = np.array([RNG.uniform(230, 380), RNG.uniform(0, 400), 0.0])
+        radar = np.array([rng.uniform(230, 380), rng.uniform(0, 400), 0.0])
         radar[2] = ter.height(radar[None, :2])[0] + 2
-        a = np.array([RNG.uniform(0, 150), RNG.uniform(0, 400), RNG.uniform(30, 70)])
-        b = np.array([RNG.uniform(250, 400), RNG.uniform(0, 400), RNG.uniform(30, 120)])
+        a = np.array([rng.uniform(0, 150), rng.uniform(0, 400), rng.uniform(30, 70)])
+        b = np.array([rng.uniform(250, 400), rng.uniform(0, 400), rng.uniform(30, 120)])
         ours = masked_segment_costs(a[None], b[None], radar[None], [1e8], ter)[0]
-        bf, seen = _brute_masked(a, b, radar, 1e8, ter)
+        bf, seen, edge_error = _brute_masked(a, b, radar, 1e8, ter)
         checked_partial += 0 < seen.mean() < 1
-        # trapezoid error at the shadow edges ~ one quadrature step of the integrand
-        assert ours == pytest.approx(bf, rel=2e-3, abs=1e-9 * 1e8)
+        assert abs(ours - bf) <= 2e-3 * bf + edge_error + 1e-9 * 1e8, (ours, bf, edge_error)
     assert checked_partial >= 3
 
 
