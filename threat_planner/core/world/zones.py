@@ -49,15 +49,16 @@ class Zone:
         raise NotImplementedError
 
     def sdf_grad(self, p: NDArray) -> NDArray:
-        """Gradient of sdf at points (..., 3), by central differences of the exact sdf."""
+        """Gradient of sdf at points (..., 3), by central differences of the exact sdf.
+
+        The six shifted copies go to sdf in one call: it works point by point, so the
+        values are those of six calls, for one call's numpy overhead (the points are few).
+        """
         p = np.asarray(p, float)
         eps = 1e-6 * max(1.0, self.scale)
-        g = np.empty(p.shape)
-        for k in range(3):
-            e = np.zeros(3)
-            e[k] = eps
-            g[..., k] = (self.sdf(p + e) - self.sdf(p - e)) / (2 * eps)
-        return g
+        steps = np.concatenate([np.eye(3) * eps, np.eye(3) * -eps])   # +x, +y, +z, -x, ...
+        vals = self.sdf(p[None] + steps.reshape((6,) + (1,) * (p.ndim - 1) + (3,)))
+        return np.moveaxis((vals[:3] - vals[3:]) / (2 * eps), 0, -1)
 
     @property
     def scale(self) -> float:
@@ -78,7 +79,11 @@ class Zone:
 
 
 def _golden(f, lo: NDArray, hi: NDArray) -> tuple[NDArray, NDArray]:
-    """Vectorised golden-section minimisation of convex f over [lo, hi]."""
+    """Vectorised golden-section minimisation of convex f over [lo, hi].
+
+    Each step keeps one of its two points and evaluates f once, at the new one of each
+    segment (f works point by point: the values are those of evaluating both).
+    """
     x1 = hi - _PHI * (hi - lo)
     x2 = lo + _PHI * (hi - lo)
     f1, f2 = f(x1), f(x2)
@@ -86,14 +91,11 @@ def _golden(f, lo: NDArray, hi: NDArray) -> tuple[NDArray, NDArray]:
         left = f1 < f2
         hi = np.where(left, x2, hi)
         lo = np.where(left, lo, x1)
-        x2n = np.where(left, x1, lo + _PHI * (hi - lo))
-        x1n = np.where(left, hi - _PHI * (hi - lo), x2)
-        f2n = np.where(left, f1, np.nan)
-        f1n = np.where(left, np.nan, f2)
-        x1, x2 = x1n, x2n
-        need1, need2 = np.isnan(f1n), np.isnan(f2n)
-        f1 = np.where(need1, f(x1), f1n)
-        f2 = np.where(need2, f(x2), f2n)
+        # Left: the old x1 becomes x2 and x1 is new; else the old x2 becomes x1.
+        x1, x2 = (np.where(left, hi - _PHI * (hi - lo), x2),
+                  np.where(left, x1, lo + _PHI * (hi - lo)))
+        fresh = f(np.where(left, x1, x2))
+        f1, f2 = np.where(left, fresh, f2), np.where(left, f1, fresh)
     t = 0.5 * (lo + hi)
     return f(t), t
 
