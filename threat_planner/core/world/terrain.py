@@ -86,9 +86,10 @@ class Terrain:
         i = np.minimum(np.floor(gx).astype(np.int64), nx - 2)
         j = np.minimum(np.floor(gy).astype(np.int64), ny - 2)
         fx, fy = gx - i, gy - j
-        h = self.heights
-        return ((1 - fy) * ((1 - fx) * h[j, i] + fx * h[j, i + 1])
-                + fy * ((1 - fx) * h[j + 1, i] + fx * h[j + 1, i + 1]))
+        # The four corners by one flat index each (the same entries as h[j, i], ...).
+        h, k = self.heights.ravel(), j * nx + i
+        return ((1 - fy) * ((1 - fx) * h[k] + fx * h[k + 1])
+                + fy * ((1 - fx) * h[k + nx] + fx * h[k + nx + 1]))
 
     def height_gradient(self, xy: ArrayLike) -> NDArray:
         """Slope (dh/dx, dh/dy) at world points (..., 2); zero across clamped edges."""
@@ -142,13 +143,13 @@ class Terrain:
         s = self._breakpoints(a, b)
         lo, hi = s[:, :-1], s[:, 1:]
         mid = 0.5 * (lo + hi)
-        d = (b - a)[:, None, :]
-
-        def f(t: NDArray) -> NDArray:
-            p = a[:, None, :] + t[..., None] * d
-            return p[..., 2] - self.height(p[..., :2])
-
-        f0, fm, f1 = f(lo), f(mid), f(hi)
+        # One evaluation at the breakpoints and the middles: a piece's end is the next
+        # one's start, and the height works point by point.
+        t = np.concatenate([s, mid], axis=1)
+        p = a[:, None, :] + t[..., None] * (b - a)[:, None, :]
+        ft = p[..., 2] - self.height(p[..., :2])
+        k1 = s.shape[1]
+        f0, fm, f1 = ft[:, :k1 - 1], ft[:, k1:], ft[:, 1:k1]
         # Quadratic through the three values of each piece; its vertex where inside.
         curv = f0 - 2 * fm + f1
         with np.errstate(divide='ignore', invalid='ignore'):
