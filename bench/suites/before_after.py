@@ -4,12 +4,15 @@ Usage (from the repository root)::
 
     git worktree add /tmp/base <commit>
     .venv/bin/python -m bench before_after /tmp/base [--out bench/results/before_after.md]
+    .venv/bin/python -m bench before_after /tmp/base --airspace --repeats 3 \
+        --out bench/results/before_after_airspace.md
 
 One long-lived worker process per checkout (``PYTHONPATH`` = that checkout) plans the
 bundled 20-threat scenarios at w = 0.2 / 0.5 / 0.8 with the default settings (the flight
 limits on) and with the limits off, and 1,000 / 10,000 threats of
 :func:`bench.toolkit.cases.scale_problem` at w 0.5; the two workers take turns on every case, after
-one untimed plan each to load the compiled kernels, so machine load falls on both alike;
+one untimed plan each to load the compiled kernels, so machine load falls on both alike
+(``--airspace``: the bundled airspace scenarios at w = 0.5 instead, limits on and off);
 ``--repeats`` turns per case (default 5; the plans are deterministic, so the runs differ
 only by the machine's load), reported as the median and the least time of each. Every J
 is the checkout's own exact J of its own path; the table gives both and their ratio, the
@@ -38,14 +41,15 @@ from bench.toolkit.cases import scale_problem
 print(json.dumps({'ready': True, 'package': threat_planner.__file__}), flush=True)
 for line in sys.stdin:
     case = json.loads(line)
+    airspace = None
     if 'threats' in case:
         threats, s, t, box = scale_problem(case['threats'])
     else:
         sc = load_scenario(case['file'])
-        threats, s, t, box = sc.threats, sc.start, sc.goal, sc.box
+        threats, s, t, box, airspace = sc.threats, sc.start, sc.goal, sc.box, sc.airspace
     cfg = PlannerConfig(w=case['w'], **case['limits'])
     t0 = time.perf_counter()
-    r = plan(threats, s, t, box, cfg)
+    r = plan(threats, s, t, box, cfg, airspace=airspace)
     ms = 1e3 * (time.perf_counter() - t0)
     print(json.dumps({'ms': ms, 'J': r.cost.J, 'feasible': bool(r.feasible)}), flush=True)
 '''
@@ -82,16 +86,17 @@ def _summary(runs: list[dict]) -> dict:
             'J': runs[0]['J'], 'feasible': runs[0]['feasible']}
 
 
-def cases() -> list[dict]:
-    """Every case, in run order."""
+def cases(airspace: bool = False) -> list[dict]:
+    """Every case, in run order (``airspace``: the airspace scenarios at w 0.5 only)."""
     out = []
-    for name in SCENARIOS:
-        for w in WS:
+    names = sorted(f.stem for f in DATA.glob('air_*.yaml')) if airspace else SCENARIOS
+    for name in names:
+        for w in (0.5,) if airspace else WS:
             for label, lim in (('on', {}), ('off', OFF)):
                 out.append({'name': f'{name}@{w}', 'limits_label': label, 'w': w,
                             'limits': lim,
                             'file': str(DATA / f'{name}.yaml')})
-    for n in (1000, 10000):
+    for n in () if airspace else (1000, 10000):
         out.append({'name': f'{n} threats', 'limits_label': 'on', 'w': 0.5, 'limits': {},
                     'threats': n})
     return out
@@ -103,15 +108,17 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument('base', type=Path, help='the other checkout (the "before")')
     ap.add_argument('--out', type=Path, default=RESULTS / 'before_after.md')
     ap.add_argument('--repeats', type=int, default=5, help='turns per case (default 5)')
+    ap.add_argument('--airspace', action='store_true',
+                    help='the airspace scenarios (w 0.5) instead of the threat-only set')
     args = ap.parse_args(argv)
     base_commit, head_commit = short_commit(args.base), short_commit(ROOT)
     before, after = Worker(args.base), Worker(ROOT)
-    warm = cases()[0]
+    warm = cases(args.airspace)[0]
     before.plan(warm)
     after.plan(warm)
     rows = []
     turn = 0
-    for case in cases():
+    for case in cases(args.airspace):
         runs: dict[int, list[dict]] = {id(before): [], id(after): []}
         for _ in range(max(args.repeats, 1)):
             # Alternate who goes first, so neither always plans on the warmer cache.
@@ -144,10 +151,11 @@ def main(argv: list[str] | None = None) -> None:
                      f"{b['J']:.4f} | {a['J']:.4f} | {a['J'] / b['J']:.5f} | "
                      f"{b['feasible']}/{a['feasible']} |")
     lines.append('')
+    kind = 'airspace scenarios' if args.airspace else '20 threats'
     for label in ('on', 'off'):
         sel = [(b, a) for c, b, a in rows if c['limits_label'] == label and 'file' in c]
         lines.append(
-            f'* 20 threats, limits {label} ({len(sel)} cases): per-case medians: median '
+            f'* {kind}, limits {label} ({len(sel)} cases): per-case medians: median '
             f"{statistics.median(b['ms'] for b, _ in sel):.1f} -> "
             f"{statistics.median(a['ms'] for _, a in sel):.1f} ms, worst "
             f"{max(b['ms'] for b, _ in sel):.1f} -> {max(a['ms'] for _, a in sel):.1f} ms; "

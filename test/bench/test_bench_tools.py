@@ -215,3 +215,16 @@ def test_moved_threats_stay_within_the_fraction_of_the_diagonal():
     np.testing.assert_array_equal(moved.intensities, sc.threats.intensities)
     np.testing.assert_array_equal(bc.moved_threats(sc.threats, diag).positions,
                                   moved.positions)
+
+
+def test_before_after_airspace_cases_are_every_airspace_scenario_at_one_weight():
+    ba = importlib.import_module('bench.suites.before_after')
+    air = ba.cases(airspace=True)
+    names = sorted(f.stem for f in DATA.glob('air_*.yaml'))
+    assert len(names) >= 6
+    assert [(c['name'], c['limits_label']) for c in air] == [
+        (f'{n}@0.5', label) for n in names for label in ('on', 'off')]
+    assert all(load_scenario(c['file']).airspace is not None for c in air)
+    plain = ba.cases()
+    assert not any('air_' in c['name'] for c in plain)
+    assert [c['threats'] for c in plain if 'threats' in c] == [1000, 10000]
