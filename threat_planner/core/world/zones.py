@@ -201,17 +201,21 @@ class BoxZone(Zone):
 
 def _polygon_sdf(xy: NDArray, poly: NDArray) -> NDArray:
     """Signed 2-D distance of points (..., 2) to a simple polygon (V, 2), < 0 inside."""
-    a = poly
+    # By components, (..., V) arrays only: the operations of the (..., V, 2) form, element
+    # by element (a sum or norm over 2 is x0 + x1), at a third of its time.
+    ax, ay = poly[:, 0], poly[:, 1]
     e = np.roll(poly, -1, axis=0) - poly
-    rel = xy[..., None, :] - a                          # (..., V, 2)
-    t = np.clip(np.sum(rel * e, -1) / np.sum(e * e, -1), 0.0, 1.0)
-    dist = np.linalg.norm(rel - t[..., None] * e, axis=-1).min(axis=-1)
+    ex, ey = e[:, 0], e[:, 1]
+    x, y = xy[..., 0, None], xy[..., 1, None]
+    rx, ry = x - ax, y - ay                                # (..., V)
+    t = np.clip((rx * ex + ry * ey) / (ex * ex + ey * ey), 0.0, 1.0)
+    dx, dy = rx - t * ex, ry - t * ey
+    dist = np.sqrt(dx * dx + dy * dy).min(axis=-1)
     # Even-odd rule for inside; points on an edge have distance 0 either way.
-    y = xy[..., None, 1]
-    cond = (a[:, 1] > y) != (a[:, 1] + e[:, 1] > y)
+    cond = (ay > y) != (ay + ey > y)
     with np.errstate(divide='ignore', invalid='ignore'):
-        x_cross = a[:, 0] + (y - a[:, 1]) * e[:, 0] / e[:, 1]
-    inside = (np.sum(cond & (xy[..., None, 0] < x_cross), axis=-1) % 2) == 1
+        x_cross = ax + (y - ay) * ex / ey
+    inside = (np.sum(cond & (x < x_cross), axis=-1) % 2) == 1
     return np.where(inside, -dist, dist)
 
 
