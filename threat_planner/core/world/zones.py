@@ -27,6 +27,8 @@ GOLDEN_STEPS = 60
 _PHI = (np.sqrt(5.0) - 1.0) / 2.0
 #: Samples of a segment that enters a prism, to report how deep it goes.
 PRISM_DEPTH_SAMPLES = 1025
+#: The central differences' unit steps: +x, +y, +z, -x, -y, -z.
+_UNIT_STEPS = np.concatenate([np.eye(3), -np.eye(3)])
 
 
 def _extrude(d2: NDArray, z: NDArray, z_min: float, z_max: float
@@ -56,7 +58,7 @@ class Zone:
         """
         p = np.asarray(p, float)
         eps = 1e-6 * max(1.0, self.scale)
-        steps = np.concatenate([np.eye(3) * eps, np.eye(3) * -eps])   # +x, +y, +z, -x, ...
+        steps = _UNIT_STEPS * eps
         vals = self.sdf(p[None] + steps.reshape((6,) + (1,) * (p.ndim - 1) + (3,)))
         return np.moveaxis((vals[:3] - vals[3:]) / (2 * eps), 0, -1)
 
