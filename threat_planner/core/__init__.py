@@ -22,11 +22,16 @@ from threat_planner.core.cost.closed_form import Cost, path_cost
 from threat_planner.core.inputs.config import PlannerConfig
 from threat_planner.core.inputs.scenario import load_scenario, Scenario
 from threat_planner.core.inputs.settings import METHODS, SETTINGS, Setting
-from threat_planner.core.planner import check_endpoints, plan
 from threat_planner.core.result import PlanResult
-from threat_planner.core.world.threats import Box, ThreatField
+from threat_planner.core.world.threats import Box, check_endpoints, ThreatField
 
 _aot.install()  # every kernel module is loaded now: the AOT kernels go in their place
 
+from threat_planner._lazy import lazy_names  # noqa: E402
+
 __all__ = ['Box', 'Cost', 'METHODS', 'PlanResult', 'PlannerConfig', 'SETTINGS', 'Scenario',
            'Setting', 'ThreatField', 'check_endpoints', 'load_scenario', 'path_cost', 'plan']
+
+# plan() loads the network's scipy.spatial (a third of a second): a process that only
+# reads threats and settings (the node's own, whose plans run in a child) never pays it.
+__getattr__, __dir__ = lazy_names(__name__, {'plan': 'threat_planner.core.planner'}, __all__)

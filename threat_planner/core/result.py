@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from threat_planner.core.cost.closed_form import Cost
-from threat_planner.core.network.partition import Network
 from threat_planner.core.optimise.limits import FlightLimits, LimitCheck
 from threat_planner.core.optimise.smoothing import AngleCheck
 from threat_planner.core.world.threats import Box, ThreatField
+
+if TYPE_CHECKING:  # the network's module imports scipy.spatial, a third of a second
+    from threat_planner.core.network.partition import Network
 
 __all__ = ['PlanResult']
 

@@ -17,10 +17,9 @@ from builtin_interfaces.msg import Time
 import numpy as np
 from numpy.typing import NDArray
 
-from threat_planner.core.planner import check_endpoints
 from threat_planner.core.world.airspace import Airspace
 from threat_planner.core.world.terrain import Terrain
-from threat_planner.core.world.threats import ThreatField
+from threat_planner.core.world.threats import check_endpoints, ThreatField
 from threat_planner.core.world.zones import Zone
 from threat_planner.errors import InputError
 from threat_planner.ros.airspace_input import (airspace_of, check_airspace_endpoints,

@@ -22,7 +22,6 @@ from numpy.typing import NDArray
 from visualization_msgs.msg import MarkerArray
 
 from threat_planner.core.cost.closed_form import Cost
-from threat_planner.core.planner import plan
 from threat_planner.core.result import PlanResult
 from threat_planner.core.world.airspace import Airspace
 from threat_planner.core.world.threats import Box, ThreatField
@@ -113,6 +112,9 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
         partial.best_so_far_cost, partial.best_so_far_points = cost, len(points)
         early(partial)
 
+    # Here, not at the top: the node's own process imports this module but plans in a
+    # child, which imports the planner (and its scipy.spatial) before it reports ready.
+    from threat_planner.core.planner import plan
     try:
         result = plan(request.threats, request.start, request.goal, s.box, s.config,
                       progress=progress, on_initial=None if early is None else on_initial,

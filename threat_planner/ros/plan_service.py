@@ -24,7 +24,6 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.task import Future
 
-from threat_planner.core.planner import plan
 from threat_planner.errors import InputError, PlanningError
 from threat_planner.ros.conversions import path_to_msg
 from threat_planner.ros.inputs import accept, InputState
@@ -58,6 +57,7 @@ def plan_on_request(state: InputState, request: GetPlan.Request) -> tuple[Path, 
             raise InputError('no threat picture received yet')
         s = accept(state, 'start', request.start)
         s = accept(s, 'goal_pose', request.goal)
+        from threat_planner.core.planner import plan  # loaded by PlanService._loop
         result = plan(s.threats, s.start, s.goal, s.settings.box, s.settings.config,
                       airspace=s.airspace)
     except (InputError, PlanningError) as exc:
@@ -134,6 +134,9 @@ class PlanService:
         return response
 
     def _loop(self) -> None:
+        # The planner (and scipy.spatial, a third of a second) loads here, beside the node's
+        # start, not in the first request: the node's own topic plans run in a child.
+        import threat_planner.core.planner  # noqa: F401
         while True:
             job = self._jobs.get()
             if job is None:

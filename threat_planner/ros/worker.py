@@ -131,6 +131,10 @@ def _child_main(conn, ready=None, go=None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     from threat_planner.ros.outputs import run_plan
     from threat_planner.core.compiled import ensure_compiled
+    # run_plan imports the planner (scipy.spatial: a third of a second) only when called,
+    # since the node's own process never plans: here it loads before the first request.
+    import threat_planner.core.planner  # noqa: F401
+    from threat_planner.bag.cdr import serialize_cdr
     if go is not None:
         # A cold cache is compiled by the node first; the child then loads what it wrote.
         go.wait()
@@ -138,8 +142,6 @@ def _child_main(conn, ready=None, go=None) -> None:
     ensure_compiled()
     if ready is not None:
         ready.set()
-
-    from threat_planner.bag.cdr import serialize_cdr
 
     def hand_over(phase, outcome) -> None:
         outcome.exception = None  # the text is in outcome.error; exceptions may not pickle

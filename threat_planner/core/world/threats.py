@@ -10,12 +10,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cached_property
 from itertools import chain
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from threat_planner.errors import InputError
+
+if TYPE_CHECKING:  # imported where a tree is built: scipy.spatial is 0.3 s to import
+    from scipy.spatial import cKDTree
 
 
 #: Largest coordinate magnitude accepted anywhere [m]. Beyond it double-precision geometry
@@ -176,6 +179,8 @@ class ThreatField:
     @cached_property
     def tree(self) -> cKDTree:
         """k-d tree over the threat positions."""
+        # A node's own process (its plans run in a child) reads threats, never their tree.
+        from scipy.spatial import cKDTree
         return cKDTree(self.positions)
 
     @cached_property
