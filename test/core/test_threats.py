@@ -41,3 +41,20 @@ def test_box_and_point_validation():
         as_point('start', [1.0, 2.0])
     with pytest.raises(InputError, match='threats: 2 positions but 1 intensities'):
         ThreatField.from_arrays([[0.0, 0, 0], [1, 1, 1]], [1.0])
+
+
+def test_endpoint_check_finds_the_nearest_threat_without_a_tree():
+    """The node's own process checks each start and goal it takes; a k-d tree there would
+    import scipy.spatial (0.3 s) into a process that never plans. The nearest threat is
+    the brute-force one, and a point within 1e-9 of the box diagonal of it is refused."""
+    from threat_planner.core.world.threats import check_endpoints
+    rng = np.random.default_rng(5)
+    th = ThreatField.from_arrays(rng.uniform(0, 100, (50, 3)), np.ones(50))
+    box = Box.from_corners([0, 0, 0], [100, 100, 100])
+    s, t = check_endpoints([0, 0, 50], [100, 100, 50], box, th)
+    assert s.tolist() == [0, 0, 50] and 'tree' not in vars(th)
+    for k in (0, 17, 49):
+        near = th.positions[k] + 1e-8   # 1.7e-8 from it: within 1.7e-7 of the box
+        with pytest.raises(InputError, match=f'goal: .* is on threat {k}$'):
+            check_endpoints([0, 0, 50], near, box, th)
+    check_endpoints([0, 0, 50], th.positions[17] + 1e-6, box, th)  # 1.7e-6: not on it

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cached_property
 from itertools import chain
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -260,7 +261,12 @@ def check_endpoints(start: ArrayLike, goal: ArrayLike, box: Box,
             raise InputError(f'{name}: {p.tolist()} is outside bounds '
                              f'{box.lo.tolist()}..{box.hi.tolist()}')
         if len(threats):
-            d, i = threats.tree.query(p)
+            # Not threats.tree: a node's process checks every input it takes, and building
+            # a k-d tree (and importing scipy.spatial) for one query costs more than this.
+            diff = threats.positions - p
+            d2 = np.einsum('ij,ij->i', diff, diff)
+            i = int(np.argmin(d2))
+            d = math.sqrt(d2[i])
             if d <= 1e-9 * max(box.diagonal, 1.0):
                 raise InputError(f'{name}: {p.tolist()} is on threat {int(i)}')
         out.append(p)
