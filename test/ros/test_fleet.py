@@ -41,7 +41,11 @@ def test_three_namespaced_planners_do_not_cross_talk(tmp_path):
                             tmp_path / 'pub.log')
         procs.append(pub)
         got2 = info(client.wait_for('/uav2/plan_info', timeout=30.0))
-        assert got2['threats'] == '20' and got2['input_source'] == '/uav2/threats'
+        # The publisher's picture, start and goal come in one burst: the node plans the
+        # newest input it holds when its worker is free, so its first plan may name the
+        # picture or a later pose (the goal in 1 of 5 runs on a busy machine), uav2's own.
+        assert got2['threats'] == '20'
+        assert got2['input_source'] in ('/uav2/threats', '/uav2/start', '/uav2/goal_pose')
         assert all(info(m)['input_source'].startswith('/uav1')
                    for _, m in client.messages['/uav1/plan_info'])
     finally:
