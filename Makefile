@@ -20,7 +20,7 @@ $(STAMP): setup.py setup.cfg package.xml
 # Again whenever a core source changes (a pull, an edit): the cache is keyed by the kernels'
 # contents, so a change to them would otherwise compile in the first plan (or test).
 $(COMPILED): $(STAMP) $(CORE_SOURCES)
-	@echo "[4/4] compiling the kernels into the cache (once per version of them, 30-130 s)"
+	@echo "[4/4] compiling the kernels into the cache (once per version of them, 50-130 s)"
 	$(BIN)/threat-planner compile
 	touch $(COMPILED)
 

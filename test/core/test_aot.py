@@ -150,7 +150,8 @@ def test_compile_builds_the_module_once_and_a_fresh_process_uses_it(runs, both):
     procs, caches = runs
     out = finish(procs['build'], timeout=1500)
     assert len(out.strip().splitlines()) == 1, out
-    assert '; built the AOT kernels' in out, out
+    # from the committed signatures, beside the workload (test_aot_signatures.py)
+    assert '; built the AOT kernels' in out and out.strip().endswith('beside the JIT workload')
     env = {'THREAT_PLANNER_CACHE_DIR': str(caches['build'])}
     assert _aot.module_path(_aot_copy(caches['build'])).is_file()
     plan = last_json(finish(start(['-c', ONE_PLAN], env)))

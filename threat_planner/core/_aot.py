@@ -29,12 +29,14 @@ import json
 import os
 from pathlib import Path
 import platform
+import shutil
 import sys
 import sysconfig
 import threading
 import types
 
-__all__ = ['ENTRY', 'active', 'aot_dir', 'install', 'jit', 'module', 'status', 'stub_njit']
+__all__ = ['ENTRY', 'active', 'aot_dir', 'install', 'jit', 'module', 'move_into_place', 'status',
+           'stub_njit']
 
 #: Kernels called from Python (not only from other kernels), by module: the exports.
 ENTRY = {
@@ -130,6 +132,15 @@ def load(folder: Path | None = None):
     if missing:
         return None, f'AOT module lacks {symbol(missing[0])}'
     return m, f'AOT kernels loaded from {path}'
+
+
+def move_into_place(folder: Path, final: Path) -> None:
+    """Make `folder` the module folder `final` at once (a half-built one is never found)."""
+    old = final.with_name(final.name + f'.old-{os.getpid()}')
+    if final.exists():
+        final.rename(old)
+    folder.rename(final)
+    shutil.rmtree(old, ignore_errors=True)
 
 
 def quals() -> list[str]:
