@@ -46,6 +46,7 @@ class ThreatPlannerLifecycleNode(ThreatPlannerNode, LifecycleNode):
         self._active = False
         self._configured = False
         self._plan_service: Optional[PlanService] = None
+        self._subs: dict = {}
         self._declare_parameters()
 
     # -- transitions -----------------------------------------------------------------

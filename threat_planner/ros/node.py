@@ -102,9 +102,12 @@ class ThreatPlannerNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self._declare_parameters()
+        # Subscriptions first: DDS discovery of the threat source, the longest wait of a
+        # start, then runs beside the set-up below (no callback runs before the spin).
+        # bench node_start, publisher 3 s before: first path 1.06 -> 0.94 s (median of 8).
+        self._create_inputs()
         self._configure()
         self._create_outputs(self.create_publisher)
-        self._create_inputs()
         self._plan_service: Optional[PlanService] = PlanService(self, lambda: self._state)
         self._log_ready()
 
@@ -124,7 +127,6 @@ class ThreatPlannerNode(Node):
         self._outcomes: collections.deque[tuple[str, PlanOutcome]] = collections.deque()
         self._outcome_lock = threading.Lock()
         self._closed = False
-        self._subs: dict = {}
         self._guard = self.create_guard_condition(self._publish_outcomes)
         # A cold cache compiles here, once, before the children start (they then load);
         # a warm one loads in the children and here at the same time.
