@@ -15,7 +15,7 @@ kernel. Steps:
    import the result, then move it and its stamp (digest, tag, signatures) into
    :func:`._aot.aot_dir` at once, so a half-built module is never found.
 
-It took 54-60 s on 2 shared cores (1-3 s of it the signatures). Given the signatures of
+It took 44-60 s on 2 shared cores (1-3 s of it the signatures). Given the signatures of
 :mod:`._aot_signatures` (``--committed``), step 1 reads them instead of the manifest and the
 JIT cache, so :func:`.compiled.compile_all` runs the build beside the JIT workload and
 keeps its module only if the workload's signatures are those (``--signatures`` prints
