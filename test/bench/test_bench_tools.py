@@ -125,9 +125,11 @@ def test_ompl_motion_cost_equals_path_cost(scenario):
 def test_ompl_planner_uses_our_motion_cost(scenario):
     th = scenario.threats
     bt.set_ompl_quiet()
+    # Wall-clock budgets: at 0.2 s RRT* once found no exact path beside the suite's other
+    # worker on a loaded machine (a fresh-clone CI run); this claims the cost, not speed.
     runs = bt.run_ompl('RRTstar', th, scenario.start, scenario.goal, scenario.box, 0.8,
-                       [0.2, 0.4])
-    assert [r['budget_s'] for r in runs] == [0.2, 0.4]
+                       [0.6, 1.2])
+    assert [r['budget_s'] for r in runs] == [0.6, 1.2]
     for r in runs:
         assert r['exact'] and r['motion_calls'] > 0
         assert r['rel_diff'] < 1e-6

@@ -102,10 +102,8 @@ class ThreatPlannerNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self._declare_parameters()
-        # Subscriptions first: DDS discovery of the threat source, the longest wait of a
-        # start, then runs beside the set-up below (no callback runs before the spin).
-        # bench node_start, medians of 8: first path 1.04 -> 0.95 s (publisher started
-        # with the node), 1.12 -> 1.03 s (publisher 3 s before).
+        # Subscriptions first: DDS discovery, a start's longest wait, runs beside the set-up
+        # below (no callback before the spin). node_start: first path 1.04 -> 0.95 s.
         self._create_inputs()
         self._configure()
         self._create_outputs(self.create_publisher)
