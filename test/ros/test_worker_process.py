@@ -118,28 +118,30 @@ def _wait(condition, timeout=60.0):
     return condition()
 
 
-def test_the_spare_starts_once_the_first_child_has_its_kernels_and_its_first_plan(
-        monkeypatch):
-    """Started with the first child, the spare's imports competed with the first child's
-    (and the node's) on two cores, and beside the first plan they made it 2-3x slower; it
-    starts once the first plan has ended, and a kill still hands over to it."""
+def test_the_spare_starts_only_once_a_plan_runs_long_enough_to_be_killed(monkeypatch):
+    """Short plans run no spare (a process of numpy, scipy and the kernels less); a plan that
+    has run SPARE_AFTER_RUNNING_S, or half its time limit, starts it, before the plan can be
+    killed; a kill hands over to it, and the next spare starts at once."""
     made, ready_then = _watch_processes(monkeypatch)
     phases = Phases()
     worker = ProcessPlanWorker(phases)
     try:
         first = made[0]
         assert first.ready.wait(60.0)
-        time.sleep(0.5)
-        assert len(made) == 1 and worker._spare is None   # SPARE_IDLE_S is 3 s
         worker.submit(request(1, method='paper'))
         phases.wait(lambda p, o: p == 'done')
+        time.sleep(0.5)
+        assert len(made) == 1 and worker._spare is None
+        # 5,000 points run for seconds: the spare starts 0.25 s in, the timeout is at 0.5 s.
+        worker.submit(request(2, n_points=5000, max_plan_time_s=0.5))
         assert _wait(lambda: len(made) == 2)
+        with phases.cond:
+            assert 'timeout' not in [p for p, _ in phases.got]
         spare = made[1]
         assert ready_then[:2] == [[], [True]]
         assert worker._child is first and worker._spare is spare
-        worker.submit(request(2, n_points=5000, max_plan_time_s=0.5))
         phases.wait(lambda p, o: p == 'timeout')
-        # The loaded spare took over, and a new spare is on its way at once.
+        # The spare took over, and a new spare is on its way at once.
         assert worker._child is spare and worker._spare is made[2] and len(made) == 3
         worker.submit(request(3, method='paper'))
         assert phases.wait(lambda p, o: p.startswith('done') and o.request.seq == 3)
@@ -148,13 +150,16 @@ def test_the_spare_starts_once_the_first_child_has_its_kernels_and_its_first_pla
     assert all(p.proc.exitcode is not None for p in made)
 
 
-def test_an_idle_worker_starts_its_spare_after_spare_idle_s(monkeypatch):
-    from threat_planner.ros import worker as module
-    monkeypatch.setattr(module, 'SPARE_IDLE_S', 0.2)
+def test_an_idle_worker_and_short_plans_run_no_spare(monkeypatch):
     made, _ = _watch_processes(monkeypatch)
-    worker = ProcessPlanWorker(Phases())
+    phases = Phases()
+    worker = ProcessPlanWorker(phases)
     try:
-        assert _wait(lambda: len(made) == 2) and worker._spare is made[1]
+        for seq in range(1, 4):
+            worker.submit(request(seq, method='paper'))
+            phases.wait(lambda p, o, seq=seq: p == 'done' and o.request.seq == seq)
+        time.sleep(1.0)
+        assert len(made) == 1 and worker._spare is None
     finally:
         assert worker.stop()
 

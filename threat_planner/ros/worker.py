@@ -110,12 +110,12 @@ CANCEL_STALE_AFTER_S = 1.0
 POLL_S = 0.02
 
 
-#: Longest wait of the spare's start for the first child's kernels [s] (a child that
-#: died meanwhile must not leave the worker without a spare for good).
-SPARE_AFTER_S = 60.0
-#: Longest wait of the spare's start, once the first child is ready, for the first plan
-#: to end [s]: importing beside that plan made it 2-3x slower (96 vs ~35 ms at 20 threats).
-SPARE_IDLE_S = 3.0
+#: A plan that has run this long starts the spare [s], or half its time limit if that is
+#: shorter: only such a plan can be killed (a stale one after CANCEL_STALE_AFTER_S, at
+#: its limit), and the spare's imports (~0.7 s) are done by then. A node whose plans are
+#: shorter runs no spare (a process of numpy, scipy and the kernels less; the suite's
+#: ~200 node starts each imported one after the first plan).
+SPARE_AFTER_RUNNING_S = 0.3
 
 
 def _child_main(conn, ready=None, go=None) -> None:
@@ -243,10 +243,9 @@ class ProcessPlanWorker:
     request waits and the plan has run :data:`CANCEL_STALE_AFTER_S`, unless the previous
     plan was cancelled too (a ``'cancelled'`` phase; so some plan always finishes). A warm
     spare process takes over after a kill, so the next plan does not wait for the imports
-    of a new one. The spare starts once the first child has loaded its kernels and the
-    first plan has ended (or :data:`SPARE_IDLE_S` after the child was ready): started with
-    it, the two children and the node loaded at once on two cores and the first picture
-    waited for the child.
+    of a new one. The spare starts once a plan has run :data:`SPARE_AFTER_RUNNING_S` (or
+    half its time limit), the first plan that could be killed; after a kill the next spare
+    starts at once.
 
     Parameters
     ----------
@@ -266,15 +265,10 @@ class ProcessPlanWorker:
         self._lock = threading.Lock()   # the child and the spare, swapped by two threads
         self._child = _first_process()
         self._spare: Optional[_PlanProcess] = None
-        self._first_ended = threading.Event()
         self._cancelled_last = False   # only the worker thread reads and writes it
         self._worker = PlanWorker(self._run, name=name)
-        threading.Thread(target=self._start_spare, args=(self._child,), daemon=True,
-                         name=f'{name}_spare').start()
 
-    def _start_spare(self, first: '_PlanProcess') -> None:
-        first.ready.wait(SPARE_AFTER_S)
-        self._first_ended.wait(SPARE_IDLE_S)
+    def _start_spare(self) -> None:
         with self._lock:
             if self._spare is None and not self._stopped.is_set():
                 self._spare = _PlanProcess()
@@ -335,6 +329,8 @@ class ProcessPlanWorker:
                 if t0 is None:
                     continue
                 running = time.monotonic() - t0
+                if self._spare is None and running >= min(SPARE_AFTER_RUNNING_S, 0.5 * limit):
+                    self._start_spare()
                 if running > limit:
                     self._replace_child()
                     self._hand_over(*timeout_outcome(request, best_so_far, running, limit))
@@ -355,5 +351,3 @@ class ProcessPlanWorker:
             self._replace_child()
             self._hand_over('error', PlanOutcome(
                 request, error=f'planner process ended (exit code {code}): {exc}'))
-        finally:
-            self._first_ended.set()
