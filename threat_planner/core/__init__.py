@@ -10,6 +10,7 @@ Nothing here imports rclpy or a message package, and no
 import runs back up this list (``test/test_layers.py`` checks both).
 """
 
+from threat_planner._lazy import lazy_names
 from threat_planner.core import _aot, _numba_cache
 
 try:
@@ -26,8 +27,6 @@ from threat_planner.core.result import PlanResult
 from threat_planner.core.world.threats import Box, check_endpoints, ThreatField
 
 _aot.install()  # every kernel module is loaded now: the AOT kernels go in their place
-
-from threat_planner._lazy import lazy_names  # noqa: E402
 
 __all__ = ['Box', 'Cost', 'METHODS', 'PlanResult', 'PlannerConfig', 'SETTINGS', 'Scenario',
            'Setting', 'ThreatField', 'check_endpoints', 'load_scenario', 'path_cost', 'plan']

@@ -172,18 +172,16 @@ def kernels_cached() -> bool:
     return _aot.active() or _read_manifest() is not None
 
 
-def _child(code: str, timeout: float | None, wait: bool = True):
-    """Run `code` in a fresh interpreter on the JIT path, with this process's path.
-
-    Returns the CompletedProcess, or with ``wait`` False the running Popen.
-    """
-    package = str(Path(__file__).resolve().parents[2])  # this copy of the sources
-    env = dict(os.environ, THREAT_PLANNER_AOT='0', PYTHONPATH=os.pathsep.join(
+def _child_env() -> dict:
+    """Return the environment of a JIT-path child, with this process's copy of the sources."""
+    package = str(Path(__file__).resolve().parents[2])
+    return dict(os.environ, THREAT_PLANNER_AOT='0', PYTHONPATH=os.pathsep.join(
         [package] + [p for p in [os.environ.get('PYTHONPATH')] if p]))
-    if not wait:
-        return subprocess.Popen([sys.executable, '-c', code], env=env, text=True,
-                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-    return subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
+
+
+def _child(code: str, timeout: float) -> subprocess.CompletedProcess:
+    """Run `code` in a fresh interpreter on the JIT path, with this process's path."""
+    return subprocess.run([sys.executable, '-c', code], env=_child_env(), capture_output=True,
                           text=True, timeout=timeout)
 
 
@@ -216,7 +214,8 @@ def _start_early_build() -> tuple[subprocess.Popen, Path] | None:
     code = ('import sys; from threat_planner.core.aot_build import main; '
             f'sys.exit(main([{str(staging)!r}, "--committed"]))')
     try:
-        return _child(code, timeout=None, wait=False), staging
+        return subprocess.Popen([sys.executable, '-c', code], env=_child_env(), text=True,
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL), staging
     except OSError:
         return None
 

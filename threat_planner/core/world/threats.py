@@ -268,6 +268,6 @@ def check_endpoints(start: ArrayLike, goal: ArrayLike, box: Box,
             i = int(np.argmin(d2))
             d = math.sqrt(d2[i])
             if d <= 1e-9 * max(box.diagonal, 1.0):
-                raise InputError(f'{name}: {p.tolist()} is on threat {int(i)}')
+                raise InputError(f'{name}: {p.tolist()} is on threat {i}')
         out.append(p)
     return out[0], out[1]
