@@ -20,6 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
+from threat_planner.core import _scipy_first  # noqa: F401,I100 (before any scipy)
 from scipy.optimize import minimize
 from scipy.spatial import cKDTree
 

@@ -23,6 +23,7 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
+from threat_planner.core import _scipy_first  # noqa: F401,I100 (before any scipy)
 from scipy.spatial import cKDTree, Delaunay, QhullError
 
 from threat_planner.core.network.graph_kernels import incentre_kernel

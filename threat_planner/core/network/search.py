@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from threat_planner.core import _scipy_first  # noqa: F401,I100 (before any scipy)
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 

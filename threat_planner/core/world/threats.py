@@ -181,6 +181,7 @@ class ThreatField:
     def tree(self) -> cKDTree:
         """k-d tree over the threat positions."""
         # A node's own process (its plans run in a child) reads threats, never their tree.
+        from threat_planner.core import _scipy_first  # noqa: F401 (before any scipy)
         from scipy.spatial import cKDTree
         return cKDTree(self.positions)
 
