@@ -316,7 +316,7 @@ def test_each_rescue_run_starts_at_a_higher_penalty_until_it_meets_the_limits(mo
             # The first refined basin stalls (also when refined again from the start).
             return dataclasses.replace(cand, limit_check=stalled) if name in first else cand
         if not kw.get('respace'):
-            return cand      # not a rescue run: the winner's polish (best._polish)
+            return cand      # not a rescue run: best._polish or best.converge
         seen.append(kw['penalty'])
         met.append(cand.limit_check.feasible)
         return cand if len(seen) >= 3 else dataclasses.replace(cand, limit_check=stalled)

@@ -21,10 +21,11 @@ from threat_planner.core.methods.basins import (basin_lead, COARSE_SEGMENTS, kno
 from threat_planner.core.methods.problem import Candidate, Problem, smooth_route
 from threat_planner.core.network.search import alternative_routes, nearest_nodes, segment_costs
 from threat_planner.core.network.seeds import surface_routes
-from threat_planner.core.optimise.optimisation import is_crowded, minimise_cost, PENALTY_START
+from threat_planner.core.optimise.optimisation import (EVEN_SPACING_WEIGHT, is_crowded,
+                                                       minimise_cost, PENALTY_START)
 from threat_planner.core.optimise.smoothing import check_angles, resample
 
-__all__ = ['plan_best', 'refine', 'repair']
+__all__ = ['converge', 'plan_best', 'refine', 'repair']
 
 #: Stopping tolerance of the coarse screening minimisation (its segments, at which basins
 #: are told apart too: basins.COARSE_SEGMENTS).
@@ -63,11 +64,18 @@ RESCUE_GROWTH = 10.0
 RESCUE_MARGIN = 0.1
 #: Bisection steps of the last-resort repair towards the straight line.
 REPAIR_BISECTIONS = 20
-#: First penalty of a warm replan's rounds (and the winner's polish), from the previous
+#: First penalty of a warm replan's rounds (and the winner's last ones), from the previous
 #: path as it is: it meets the limits, and a low penalty let the first round leave it and
 #: come back elsewhere. The 21 bundled cases after every threat moved 1 mm, warm J at most
 #: 1e-6 above a cold plan's: 16 at 10, 18 at 100, 14 at 1000.
 WARM_PENALTY = 100.0
+#: Even-spacing weight of the last rounds (:func:`converge`), against EVEN_SPACING_WEIGHT
+#: before. The spacing term keeps vertices from bunching while the path finds its shape,
+#: but it also holds them off J's own optimum, and rounds that stop on a small gain then
+#: end anywhere along that slope: uniform20_0 at w 0.8 ended at J 144.98-145.30 with its
+#: threats moved 1 nm-1 mm, where SLSQP from those ends found two minima, 144.956 and
+#: 144.763; rounds at 0.01 from each end met them to 1e-4 (10 ms), at 1.0 they moved 0.
+FINAL_EVEN = 0.01
 
 
 def plan_best(p: Problem) -> Candidate:
@@ -198,7 +206,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
             break
     best = _rescue(p, best, refined)
     if bound and _usable(best):
-        best = _polish(p, best)
+        best = converge(p, _polish(p, best))
     if not bound and not p.limits.any_constraint:
         best, margin = _surface_alternative(p, best, order, routes[0], margin)
     # The warm-start rule's lead: the screening's where the limits did not bind; where
@@ -260,34 +268,42 @@ def _rescue(p: Problem, best: Candidate, refined: list[Candidate]) -> Candidate:
 
 
 def _polish(p: Problem, best: Candidate) -> Candidate:
-    """Return best, or its rounds again from its own path as a warm replan runs them.
+    """Return best, or its rounds again from the coarser answer where it went astray.
 
-    The finest level starts where the coarser answer, subdivided, broke the turn radius,
-    and stops on a small gain: the same candidate of one field ended up to 0.5 % apart
-    with the threats moved 1 um. Where it ended above the coarser level's J (it did not
-    settle), its rounds run again from the path as it is (it meets the limits;
-    WARM_PENALTY, tolerance 1e-8); over python -m bench perturbation's 66 cases that left
-    5 cases above 0.1 % of the unmoved J against 7 (largest 1.0046 against 1.0244), for
-    no measurable time. Where it ended more than UNSETTLED above, they also run from the
-    coarser answer resampled (n20 seed 1 w 0.8: 1216 -> 400, its moved twins 396-401
-    where they had ranged 396-3444); the lowest usable result is kept.
+    Where the finest level ended more than UNSETTLED above the coarser level's J (a vertex
+    pinned onto a start in a corner of the box, its segment folded to nothing), its rounds
+    run again from the coarser answer resampled (WARM_PENALTY, tolerance 1e-8; n20 seed 1
+    w 0.8: 1216 -> 400, its moved twins 396-401 where they had ranged 396-3444), and the
+    lower usable one is kept. (A finest level that ended above the coarser J by less is
+    :func:`converge`'s to finish, as every other.)
+    """
+    if len(best.final) != p.config.n_points + 1 or not best.levels:
+        return best
+    if best.cost.J <= (1.0 + UNSETTLED) * p.cost(best.levels[-1]).J:
+        return best
+    again = refine(p, resample(best.levels[-1], p.config.n_points), best.seq, best.seed,
+                   tolerance=1e-8, warm=True, penalty=WARM_PENALTY)
+    if _usable(again) and again.cost.J < best.cost.J:
+        again.limits_bound, again.levels = True, best.levels
+        return again
+    return best
+
+
+def converge(p: Problem, best: Candidate) -> Candidate:
+    """Return best, or its rounds again at FINAL_EVEN from its own path where lower in J.
+
+    Where the limits bound, the rounds end where a round gained little, short of the
+    constrained minimum and wherever rounding leaves them; from there, with the spacing
+    held less, they reach the minimum of the basin the path is in (FINAL_EVEN), so a
+    plan moves with the input wherever that minimum does.
     """
     if len(best.final) != p.config.n_points + 1:
         return best
-    coarse_j = p.cost(best.levels[-1]).J if best.levels else None
-    if coarse_j is not None and best.cost.J <= coarse_j:
-        return best
-    tries = [best.final]
-    if coarse_j is not None and best.cost.J > (1.0 + UNSETTLED) * coarse_j:
-        # Far above: the finest level went astray (a vertex pinned onto a start in a
-        # corner of the box, its segment folded to nothing); from the coarser answer too.
-        tries.append(resample(best.levels[-1], p.config.n_points))
-    for start in tries:
-        again = refine(p, start, best.seq, best.seed, tolerance=1e-8, warm=True,
-                       penalty=WARM_PENALTY)
-        if _usable(again) and again.cost.J < best.cost.J:
-            again.limits_bound, again.levels = True, best.levels
-            best = again
+    again = refine(p, best.final, best.seq, best.seed, tolerance=1e-8, warm=True,
+                   penalty=WARM_PENALTY, even=FINAL_EVEN)
+    if _usable(again) and again.cost.J < best.cost.J:
+        again.limits_bound, again.levels = True, best.levels
+        return again
     return best
 
 
@@ -368,7 +384,8 @@ def repair(p: Problem, cand: Candidate) -> Candidate:
 def refine(p: Problem, start: NDArray, seq: list[int], name: str,
            tolerance: float = 1e-6, warm: bool = False, box_broken: bool = False,
            gate: Callable[[NDArray], bool] | None = None,
-           penalty: float | None = None, respace: bool = False) -> Candidate:
+           penalty: float | None = None, respace: bool = False,
+           even: float = EVEN_SPACING_WEIGHT) -> Candidate:
     """Minimise J from a path of n_points segments inside the box and the flight limits.
 
     Parameters
@@ -385,11 +402,12 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
         Relative J decrease per iteration below which L-BFGS stops.
     warm : bool
         The start is a previous plan: straight to the constrained rounds if it is feasible.
-    box_broken, gate, penalty, respace
+    box_broken, gate, penalty, respace, even
         As :func:`.optimisation.minimise_cost`: the basin's box-only optimum breaks the
         limits; stop at a coarser level (the candidate's path then at its resolution);
         the rounds' first penalty (None: PENALTY_START, WARM_PENALTY for a warm start);
-        a warm start evenly resampled first (the rescue's runs) or taken as it is.
+        a warm start evenly resampled first (the rescue's runs) or taken as it is; the
+        rounds' even-spacing weight.
 
     Returns
     -------
@@ -402,7 +420,8 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
     opt = minimise_cost(start, p.threats, cfg.w, p.box if cfg.confine_to_box else None,
                         p.limits, tolerance=tolerance, constrained_only=warm,
                         cutoff=_optimiser_cutoff(cfg.n_points, p),
-                        box_broken=box_broken, gate=gate, penalty=penalty, respace=respace)
+                        box_broken=box_broken, gate=gate, penalty=penalty, respace=respace,
+                        even=even)
     return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
                      smoothed=None, smoothed_cost=None, final=opt.points, k=float('nan'),
                      steps=0, converged=True, cost=p.cost(opt.points),

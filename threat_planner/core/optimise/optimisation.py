@@ -104,7 +104,8 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
                   constrained_iterations: int = 200, constrained_rounds: int = MAX_OUTER,
                   constrained_only: bool = False, box_broken: bool = False,
                   gate: Callable[[NDArray], bool] | None = None,
-                  penalty: float = PENALTY_START, respace: bool = True) -> OptimisationResult:
+                  penalty: float = PENALTY_START, respace: bool = True,
+                  even: float = EVEN_SPACING_WEIGHT) -> OptimisationResult:
     """Minimise J over the interior vertices within the box and the flight limits.
 
     Parameters
@@ -149,6 +150,9 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         With ``constrained_only``, resample the start evenly first; False: the rounds
         start from it as it is where it has the path's segments (a previous plan, whose
         spacing holds its corners: resampled evenly, the turns it met broke the radius).
+    even : float
+        Weight of the rounds' even-spacing term (EVEN_SPACING_WEIGHT); less lets the
+        vertices sit where J wants them, from a start whose spacing is already sound.
 
     Returns
     -------
@@ -217,7 +221,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
             path, threats, w, box, limits, cutoff, COARSE_LEVEL_TOLERANCE, stats, smooth)
         x, lam, best = lvl.constrained(path, lam, penalty, constrained_iterations,
                                        constrained_rounds, keep_start=keep and finest,
-                                       gain=FINEST_GAIN if finest else None)
+                                       gain=FINEST_GAIN if finest else None, even=even)
         if not finest:
             levels.append(x if best is None else best)
     # (best None: stalled short of feasibility; the caller repairs or reports.)
@@ -328,7 +332,7 @@ class _Level:
 
     def constrained(self, x: NDArray, lam: NDArray | None, mu: float, maxiter: int,
                     rounds: int = MAX_OUTER, keep_start: bool = False,
-                    gain: float | None = None) -> tuple:
+                    gain: float | None = None, even: float = EVEN_SPACING_WEIGHT) -> tuple:
         """Augmented Lagrangian rounds from x (multipliers lam of a coarser level or None).
 
         Returns ``(x, (term, lam), best)``: the last iterate, its multipliers with their
@@ -337,12 +341,13 @@ class _Level:
         level starts at penalty ``mu``: carrying the coarse level's grown penalty made the
         fine rounds too stiff (uniform20_0 at w 0.8: infeasible, J +12 %).
         ``gain`` also stops at a feasible round that lowered J by less than that fraction
-        from the best feasible one before (the finest level, FINEST_GAIN). Afterwards
+        from the best feasible one before (the finest level, FINEST_GAIN); ``even`` weighs
+        the even-spacing term (EVEN_SPACING_WEIGHT x the spring unit). Afterwards
         ``self.trace`` (rounds, 3) holds each round's J, feasibility and violation.
         """
         x = self.clip(x)
         self.pick_pairs(x)
-        even = EVEN_SPACING_WEIGHT * self.spring_unit
+        even = even * self.spring_unit
         scale = float(objective_scale(self.value(x, even)))
         term = LimitTerm(self.limits.tightened(ANGLE_MARGIN_DEG, RADIUS_MARGIN), self.n)
         lam = np.zeros(term.rows) if lam is None else term.transfer(lam)
