@@ -139,6 +139,28 @@ def test_cold_plans_of_one_basin_end_at_its_minimum(seed):
     assert j <= (1.0 + TOLERANCE) * given, (given, j)
 
 
+def test_a_finest_level_gone_astray_is_refined_again_subdivided():
+    """n20 seed 1 w 0.8 of bench perturbation's random fields, every threat moved 1 nm
+    (its seed 1): the winner's finest level ended at J 452 against 392 at 20 segments,
+    and its rounds again from that answer broke a limit, so the plan was 452, 13 % above
+    the unmoved plan's 399.1 (on a2fc7e7). Refined again with every level subdivided
+    (best._polish) it ends at 395.8."""
+    import importlib
+    import sys
+    from pathlib import Path
+    root = str(Path(__file__).resolve().parents[2])
+    if root not in sys.path:
+        sys.path.insert(0, root)
+    bench = importlib.import_module('bench.suites.perturbation')
+    k, (_, threats, s, t, box, w) = next((k, c) for k, c in enumerate(bench.cases())
+                                         if c[0] == 'n20 seed 1 w 0.8')
+    cfg = PlannerConfig(w=w)
+    given = plan(threats, s, t, box, cfg)
+    moved = plan(bench.nudged(threats, bench.SEEDS * k + 1, 1e-9), s, t, box, cfg)
+    assert given.feasible and moved.feasible
+    assert moved.cost.J <= (1.0 + TOLERANCE) * given.cost.J, (given.cost.J, moved.cost.J)
+
+
 @pytest.mark.parametrize('name, w', [('uniform20_1', 0.811), ('uniform20_0', 0.544)])
 def test_a_looser_climb_limit_never_plans_higher(name, w):
     """The path planned at max climb c meets every looser limit, so J may only fall as c

@@ -268,24 +268,30 @@ def _rescue(p: Problem, best: Candidate, refined: list[Candidate]) -> Candidate:
 
 
 def _polish(p: Problem, best: Candidate) -> Candidate:
-    """Return best, or its rounds again from the coarser answer where it went astray.
+    """Return best, or its rounds again from its coarser answers where it went astray.
 
     Where the finest level ended more than UNSETTLED above the coarser level's J (a vertex
     pinned onto a start in a corner of the box, its segment folded to nothing), its rounds
     run again from the coarser answer resampled (WARM_PENALTY, tolerance 1e-8; n20 seed 1
-    w 0.8: 1216 -> 400, its moved twins 396-401 where they had ranged 396-3444), and the
-    lower usable one is kept. (A finest level that ended above the coarser J by less is
-    :func:`converge`'s to finish, as every other.)
+    w 0.8: 1216 -> 400), and it is refined again from the coarsest answer with every level
+    subdivided (``subdivide``: linear resampling halves the turn radius at every coarse
+    vertex, and the finer rounds started far off it); the lowest usable one is kept. The
+    same field with every threat moved 1 nm: 452 and a rerun that broke a limit, then
+    395.8 subdivided (unmoved: 399.1). (A finest level that ended above the coarser J by
+    less is :func:`converge`'s to finish, as every other.)
     """
     if len(best.final) != p.config.n_points + 1 or not best.levels:
         return best
     if best.cost.J <= (1.0 + UNSETTLED) * p.cost(best.levels[-1]).J:
         return best
-    again = refine(p, resample(best.levels[-1], p.config.n_points), best.seq, best.seed,
-                   tolerance=1e-8, warm=True, penalty=WARM_PENALTY)
-    if _usable(again) and again.cost.J < best.cost.J:
-        again.limits_bound, again.levels = True, best.levels
-        return again
+    n = p.config.n_points
+    for again in (refine(p, resample(best.levels[-1], n), best.seq, best.seed,
+                         tolerance=1e-8, warm=True, penalty=WARM_PENALTY),
+                  refine(p, resample(best.levels[0], n), best.seq, best.seed,
+                         box_broken=True, subdivide=True)):
+        if _usable(again) and again.cost.J < best.cost.J:
+            again.limits_bound, again.levels = True, again.levels or best.levels
+            best = again
     return best
 
 
@@ -385,7 +391,7 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
            tolerance: float = 1e-6, warm: bool = False, box_broken: bool = False,
            gate: Callable[[NDArray], bool] | None = None,
            penalty: float | None = None, respace: bool = False,
-           even: float = EVEN_SPACING_WEIGHT) -> Candidate:
+           even: float = EVEN_SPACING_WEIGHT, subdivide: bool = False) -> Candidate:
     """Minimise J from a path of n_points segments inside the box and the flight limits.
 
     Parameters
@@ -402,12 +408,12 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
         Relative J decrease per iteration below which L-BFGS stops.
     warm : bool
         The start is a previous plan: straight to the constrained rounds if it is feasible.
-    box_broken, gate, penalty, respace, even
+    box_broken, gate, penalty, respace, even, subdivide
         As :func:`.optimisation.minimise_cost`: the basin's box-only optimum breaks the
         limits; stop at a coarser level (the candidate's path then at its resolution);
         the rounds' first penalty (None: PENALTY_START, WARM_PENALTY for a warm start);
         a warm start evenly resampled first (the rescue's runs) or taken as it is; the
-        rounds' even-spacing weight.
+        rounds' even-spacing weight; every level from the coarser one subdivided.
 
     Returns
     -------
@@ -421,7 +427,7 @@ def refine(p: Problem, start: NDArray, seq: list[int], name: str,
                         p.limits, tolerance=tolerance, constrained_only=warm,
                         cutoff=_optimiser_cutoff(cfg.n_points, p),
                         box_broken=box_broken, gate=gate, penalty=penalty, respace=respace,
-                        even=even)
+                        even=even, subdivide=subdivide)
     return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
                      smoothed=None, smoothed_cost=None, final=opt.points, k=float('nan'),
                      steps=0, converged=True, cost=p.cost(opt.points),

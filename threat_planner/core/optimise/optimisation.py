@@ -105,7 +105,8 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
                   constrained_only: bool = False, box_broken: bool = False,
                   gate: Callable[[NDArray], bool] | None = None,
                   penalty: float = PENALTY_START, respace: bool = True,
-                  even: float = EVEN_SPACING_WEIGHT) -> OptimisationResult:
+                  even: float = EVEN_SPACING_WEIGHT, subdivide: bool = False
+                  ) -> OptimisationResult:
     """Minimise J over the interior vertices within the box and the flight limits.
 
     Parameters
@@ -153,6 +154,9 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     even : float
         Weight of the rounds' even-spacing term (EVEN_SPACING_WEIGHT); less lets the
         vertices sit where J wants them, from a start whose spacing is already sound.
+    subdivide : bool
+        Each level starts from the coarser answer subdivided (:func:`_prolong`), not only
+        the finest: a second way through the levels where the first went astray.
 
     Returns
     -------
@@ -216,7 +220,7 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
         if finest and skip and not respace and count == n - 1:
             path = x
         else:
-            path = _prolong(x, count) if finest else resample(x, count)
+            path = _prolong(x, count) if finest or subdivide else resample(x, count)
         lvl = level if finest else probe if count == probe.n - 1 else _Level(
             path, threats, w, box, limits, cutoff, COARSE_LEVEL_TOLERANCE, stats, smooth)
         x, lam, best = lvl.constrained(path, lam, penalty, constrained_iterations,
