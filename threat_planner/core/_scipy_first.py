@@ -7,7 +7,8 @@ vendored array-api-compat clones numpy's namespace (``from numpy import *``, the
 (``bench/results/cold_start.md``). While that one import runs, numpy answers those names
 with a stand-in that imports the submodule on its first attribute, so the clone holds the
 stand-in and nothing is loaded; numpy's own loader is back in place afterwards, and
-``numpy.testing`` and the rest import as ever.
+``numpy.testing`` and the rest import as ever (a thread that reads one of those names
+during that import gets the stand-in, which answers its attributes as the module does).
 """
 
 from __future__ import annotations

@@ -160,10 +160,12 @@ def _plan_warm(previous: PlanResult, threats: ThreatField, s: NDArray, t: NDArra
         return note
     problem = Problem(threats=threats, s=s, t=t, box=box, config=config,
                       network=previous.network, edge_j=None, clock=clock)
-    # Ended as a cold plan ends (best.converge): from a start that broke a limit, the
-    # rounds at FINAL_EVEN alone ended 6e-5 above the cold plan (test_plan_limits).
-    cand = converge(problem, refine(problem, path, previous.node_sequence, previous.seed,
-                                    tolerance=1e-8, warm=True))
+    cand = refine(problem, path, previous.node_sequence, previous.seed, tolerance=1e-8,
+                  warm=True)
+    if cand.limits_bound:
+        # Ended as a cold plan ends (best.converge): from a start that broke a limit,
+        # the rounds at FINAL_EVEN alone ended 6e-5 above the cold plan (test_plan_limits).
+        cand = converge(problem, cand)
     cand.basin_margin = previous.basin_margin
     clock.lap('warm_ms')
     if previous.feasible and not cand.limit_check.feasible:
