@@ -301,9 +301,13 @@ def converge(p: Problem, best: Candidate) -> Candidate:
     Where the limits bound, the rounds end where a round gained little, short of the
     constrained minimum and wherever rounding leaves them; from there, with the spacing
     held less, they reach the minimum of the basin the path is in (FINAL_EVEN), so a
-    plan moves with the input wherever that minimum does.
+    plan moves with the input wherever that minimum does. Only where the optimiser counts
+    every threat (:func:`_optimiser_cutoff`): under a cut-off the rounds lower a J without
+    the far threats, and on random 300- and 1,000-threat fields they ran 220-550 L-BFGS
+    iterations (45-105 ms, the plan's other rounds 20-35 ms) for no lower J.
     """
-    if len(best.final) != p.config.n_points + 1:
+    n = p.config.n_points
+    if len(best.final) != n + 1 or _optimiser_cutoff(n, p) is not None:
         return best
     again = refine(p, best.final, best.seq, best.seed, tolerance=1e-8, warm=True,
                    penalty=WARM_PENALTY, even=FINAL_EVEN)
