@@ -42,6 +42,9 @@ SCENARIO = DATA / 'uniform20_0.yaml'
 COLCON = Path(sys.executable).with_name('colcon')
 #: Starts of the installed node after the first one.
 SECOND_STARTS = 3
+#: The node's log line of a finished plan, and how long to wait for it after the path.
+PLAN_LINE = ']: plan for input #'
+LOG_WAIT_S = 5.0
 
 PLAN_IN_PROCESS = r"""
 import json, sys, time
@@ -134,7 +137,8 @@ def _first_path(install: Path, cache: Path, work: Path, tag: str,
     """Seconds from starting the installed planner_node to its first path.
 
     Three clocks: ``ready_s`` and ``published_s``, the node's own log stamps of its
-    'ready' line and of its first 'plan for input' line; ``received_s``, when this
+    'ready' line and of its first 'plan for input' line (logged once the path and then
+    plan_info are out, so it can stamp later than ``received_s``); ``received_s``, when this
     process's subscriber got the latched path (it also waits on DDS discovery between a
     new subscriber and the new node, which once the first announcements are missed
     waits for the next periodic one). The publisher starts with the node, or with
@@ -175,11 +179,16 @@ def _first_path(install: Path, cache: Path, work: Path, tag: str,
             start(exe, args)
         client.wait_for('/path', lambda m: len(m.poses) >= 2, timeout=300.0)
         out = {'received_s': time.perf_counter() - t0}
+        # The node logs its 'plan for input' line after the path, once plan_info is out:
+        # stopped at once, one later start of three had no such line (a nan median).
+        deadline = time.perf_counter() + LOG_WAIT_S
+        while log_stamp(node_log, PLAN_LINE) is None and time.perf_counter() < deadline:
+            time.sleep(0.05)
     finally:
         for p in reversed(procs):
             stop_process(p)
         client.close()
-    for key, text in (('ready_s', ']: ready: '), ('published_s', ']: plan for input #')):
+    for key, text in (('ready_s', ']: ready: '), ('published_s', PLAN_LINE)):
         stamp = log_stamp(node_log, text)
         out[key] = float('nan') if stamp is None else stamp - epoch0
     return out
