@@ -139,12 +139,8 @@ def test_cold_plans_of_one_basin_end_at_its_minimum(seed):
     assert j <= (1.0 + TOLERANCE) * given, (given, j)
 
 
-def test_a_finest_level_gone_astray_is_refined_again_subdivided():
-    """n20 seed 1 w 0.8 of bench perturbation's random fields, every threat moved 1 nm
-    (its seed 1): the winner's finest level ended at J 452 against 392 at 20 segments,
-    and its rounds again from that answer broke a limit, so the plan was 452, 13 % above
-    the unmoved plan's 399.1 (on a2fc7e7). Refined again with every level subdivided
-    (best._polish) it ends at 395.8."""
+def _perturbation_case(name: str):
+    """Return bench perturbation's module, the case's index (its seeds) and the case."""
     import importlib
     import sys
     from pathlib import Path
@@ -152,8 +148,17 @@ def test_a_finest_level_gone_astray_is_refined_again_subdivided():
     if root not in sys.path:
         sys.path.insert(0, root)
     bench = importlib.import_module('bench.suites.perturbation')
-    k, (_, threats, s, t, box, w) = next((k, c) for k, c in enumerate(bench.cases())
-                                         if c[0] == 'n20 seed 1 w 0.8')
+    k, case = next((k, c) for k, c in enumerate(bench.cases()) if c[0] == name)
+    return bench, k, case
+
+
+def test_a_finest_level_gone_astray_is_refined_again_subdivided():
+    """n20 seed 1 w 0.8 of bench perturbation's random fields, every threat moved 1 nm
+    (its seed 1): the winner's finest level ended at J 452 against 392 at 20 segments,
+    and its rounds again from that answer broke a limit, so the plan was 452, 13 % above
+    the unmoved plan's 399.1 (on a2fc7e7). Refined again with every level subdivided
+    (best._polish) it ends at 395.8."""
+    bench, k, (_, threats, s, t, box, w) = _perturbation_case('n20 seed 1 w 0.8')
     cfg = PlannerConfig(w=w)
     given = plan(threats, s, t, box, cfg)
     moved = plan(bench.nudged(threats, bench.SEEDS * k + 1, 1e-9), s, t, box, cfg)
@@ -167,15 +172,7 @@ def test_equal_breaches_start_the_rounds_from_the_box_only_optimum():
     rounds started from: 490.4 unmoved, 408.5 with every threat moved 1 nm (on d18d96f).
     With optimisation.START_MARGIN both start from the box-only optimum and end together,
     near 405."""
-    import importlib
-    import sys
-    from pathlib import Path
-    root = str(Path(__file__).resolve().parents[2])
-    if root not in sys.path:
-        sys.path.insert(0, root)
-    bench = importlib.import_module('bench.suites.perturbation')
-    k, (_, threats, s, t, box, w) = next((k, c) for k, c in enumerate(bench.cases())
-                                         if c[0] == 'n120 seed 0 w 0.8')
+    bench, k, (_, threats, s, t, box, w) = _perturbation_case('n120 seed 0 w 0.8')
     cfg = PlannerConfig(w=w)
     given = plan(threats, s, t, box, cfg).cost.J
     moved = plan(bench.nudged(threats, bench.SEEDS * k, 1e-9), s, t, box, cfg).cost.J

@@ -289,9 +289,7 @@ def _polish(p: Problem, best: Candidate) -> Candidate:
                          tolerance=1e-8, warm=True, penalty=WARM_PENALTY),
                   refine(p, resample(best.levels[0], n), best.seq, best.seed,
                          box_broken=True, subdivide=True)):
-        if _usable(again) and again.cost.J < best.cost.J:
-            again.limits_bound, again.levels = True, again.levels or best.levels
-            best = again
+        best = _lower(best, again)
     return best
 
 
@@ -309,10 +307,14 @@ def converge(p: Problem, best: Candidate) -> Candidate:
     n = p.config.n_points
     if len(best.final) != n + 1 or _optimiser_cutoff(n, p) is not None:
         return best
-    again = refine(p, best.final, best.seq, best.seed, tolerance=1e-8, warm=True,
-                   penalty=WARM_PENALTY, even=FINAL_EVEN)
+    return _lower(best, refine(p, best.final, best.seq, best.seed, tolerance=1e-8,
+                               warm=True, penalty=WARM_PENALTY, even=FINAL_EVEN))
+
+
+def _lower(best: Candidate, again: Candidate) -> Candidate:
+    """Return `again` (bound, with best's levels if it has none) if usable and lower in J."""
     if _usable(again) and again.cost.J < best.cost.J:
-        again.limits_bound, again.levels = True, best.levels
+        again.limits_bound, again.levels = True, again.levels or best.levels
         return again
     return best
 
