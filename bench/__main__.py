@@ -14,6 +14,8 @@ import sys
 SUITES: dict[str, tuple[str, str, str]] = {
     'airspace': ('bench.suites.airspace', 'main',
                  'zones and terrain: ours beside a blocked-edge grid yardstick and RRT*'),
+    'blas_threads': ('bench.suites.blas_threads', 'main',
+                     'plans with BLAS held to one thread and without, in turns'),
     'batch': ('bench.batch', 'main',
               'threat-planner batch at scale: backends, kill and resume, robust plans'),
     'before_after': ('bench.suites.before_after', 'main',

@@ -169,3 +169,20 @@ def test_a_big_first_plan_loads_the_kernels_beside_the_delaunay_and_plans_the_sa
                          text=True, check=True, timeout=240).stdout.split('\n')
     assert out[0] == f'{big} False 1'
     assert out[1] == 'True True True'
+
+
+def test_blas_is_held_to_one_thread_from_blas_limit_threats_only():
+    """Below, the scan for BLAS libraries (6-9 ms of a first plan) bought no speed."""
+    from threadpoolctl import ThreadpoolController
+    from threat_planner.core.planner import _one_blas_thread, BLAS_LIMIT_THREATS
+
+    def threads() -> set[int]:
+        return {i['num_threads'] for i in ThreadpoolController().info()
+                if i['user_api'] == 'blas'}
+    # The suite runs on one BLAS thread (conftest): two first, so the limit shows.
+    with ThreadpoolController().limit(limits=2, user_api='blas'):
+        assert threads() == {2}
+        with _one_blas_thread(BLAS_LIMIT_THREATS):
+            assert threads() == {1}
+        with _one_blas_thread(BLAS_LIMIT_THREATS - 1):
+            assert threads() == {2}

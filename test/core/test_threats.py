@@ -1,5 +1,6 @@
 """Threat model (paper Section 3.1) and the flight box."""
 
+from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
@@ -58,3 +59,12 @@ def test_endpoint_check_finds_the_nearest_threat_without_a_tree():
         with pytest.raises(InputError, match=f'goal: .* is on threat {k}$'):
             check_endpoints([0, 0, 50], near, box, th)
     check_endpoints([0, 0, 50], th.positions[17] + 1e-6, box, th)  # 1.7e-6: not on it
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(1e-3, 1e9), min_size=1, max_size=40))
+def test_median_intensity_is_numpy_s_median_bit_for_bit(values):
+    """Computed without np.median, whose NaN check imports numpy.ma on a first plan."""
+    n = len(values)
+    field = ThreatField(np.zeros((n, 3)) + np.arange(n)[:, None], np.array(values))
+    assert field.median_intensity == float(np.median(values))

@@ -9,17 +9,20 @@ with a stand-in that imports the submodule on its first attribute, so the clone 
 stand-in and nothing is loaded; numpy's own loader is back in place afterwards, and
 ``numpy.testing`` and the rest import as ever (a thread that reads one of those names
 during that import gets the stand-in, which answers its attributes as the module does).
+:func:`unmasked` keeps ``numpy.ma`` out of Qhull's masked-array check the same way.
 """
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 import importlib
 import sys
-from typing import Callable
+import threading
+from typing import Callable, Iterator
 
 import numpy
 
-__all__ = ['SKIPPED']
+__all__ = ['SKIPPED', 'unmasked']
 
 #: numpy's lazy submodules left unloaded by scipy's import (not ``linalg``, ``fft``,
 #: ``random`` or ``typing``, which scipy uses).
@@ -35,6 +38,49 @@ class _Later:
 
     def __getattr__(self, attr: str) -> object:
         return getattr(importlib.import_module(f'numpy.{self._name}'), attr)
+
+
+class _Unmasked(_Later):
+    """``numpy.ma`` before anything imported it: no array can be masked yet."""
+
+    @staticmethod
+    def isMaskedArray(x: object) -> bool:  # noqa: N802 (numpy's name)
+        ma = sys.modules.get('numpy.ma')
+        return ma is not None and ma.isMaskedArray(x)
+
+
+@contextmanager
+def unmasked() -> Iterator[None]:
+    """Within, ``numpy.ma`` answers ``isMaskedArray`` without being imported.
+
+    scipy's Delaunay asks ``np.ma.isMaskedArray(points)`` of every input, and the first
+    ask imports ``numpy.ma``: 12-14 ms of a process's first plan, for arrays the planner
+    made itself. A masked array exists only once ``numpy.ma`` is loaded, so until then the
+    answer is False; once it is loaded, numpy's own loader answers as ever.
+    """
+    with _UNMASKED['lock']:
+        if _UNMASKED['depth'] == 0:
+            _UNMASKED['loader'] = numpy.__dict__.get('__getattr__')
+            if _UNMASKED['loader'] is not None and 'numpy.ma' not in sys.modules:
+                numpy.__getattr__ = _unmasked_getattr
+        _UNMASKED['depth'] += 1
+    try:
+        yield
+    finally:
+        with _UNMASKED['lock']:
+            _UNMASKED['depth'] -= 1
+            if _UNMASKED['depth'] == 0 and numpy.__dict__.get('__getattr__') is _unmasked_getattr:
+                numpy.__getattr__ = _UNMASKED['loader']
+
+
+#: numpy's loader while :func:`unmasked` is in force, and in how many threads it is.
+_UNMASKED: dict = {'lock': threading.Lock(), 'depth': 0, 'loader': None}
+
+
+def _unmasked_getattr(name: str) -> object:
+    if name == 'ma' and 'numpy.ma' not in sys.modules:
+        return _Unmasked('ma')
+    return _UNMASKED['loader'](name)
 
 
 def _import_array_api() -> None:

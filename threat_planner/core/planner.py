@@ -6,14 +6,13 @@ The methods themselves are in :mod:`threat_planner.core.methods.registry`; setti
 
 from __future__ import annotations
 
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from functools import lru_cache
 import threading
-from typing import Callable, Iterator
+from typing import Callable, ContextManager, Iterator, TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from threadpoolctl import ThreadpoolController
 
 from threat_planner.core.cost.closed_form import Cost
 from threat_planner.core.inputs.config import PlannerConfig
@@ -28,6 +27,9 @@ from threat_planner.core.result import PlanResult
 from threat_planner.core.world.airspace import Airspace
 from threat_planner.core.world.threats import Box, check_endpoints, ThreatField
 from threat_planner.errors import InputError, PlanningError
+
+if TYPE_CHECKING:
+    from threadpoolctl import ThreadpoolController
 
 __all__ = ['K_SWEEP', 'METHODS', 'PlanResult', 'PlannerConfig', 'check_endpoints', 'plan']
 
@@ -77,9 +79,7 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         airspace.check_point('goal', t)
     else:
         airspace = None
-    # The optimisers make thousands of tiny BLAS calls; a threaded BLAS spends longer waking
-    # its threads than computing, and far longer when the cores are busy (measured: 4x).
-    with _blas().limit(limits=1, user_api='blas'), _joining_kernels():
+    with _one_blas_thread(len(threats)), _joining_kernels():
         note = ''
         if warm_start is not None and airspace is None:
             warm = _plan_warm(warm_start, threats, s, t, box, config)
@@ -89,6 +89,29 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         result = _plan(threats, s, t, box, config, progress, airspace, on_initial)
         result.warm_note = note
         return result
+
+
+#: Threats from which plan() holds BLAS to one thread. A threaded BLAS on a busy machine
+#: slowed big fields (beside two busy loops, big300_0 + 1,000 + 5,000 threats 1.29x slower
+#: without the limit); below, no plan was faster with it, quiet or busy (21 bundled cases
+#: 0.94x / 0.97x, 60 and 120 threats 1.00x), and finding the BLAS libraries to limit
+#: (realpath of ~100 loaded libraries) cost 6-9 ms of a process's first plan
+#: (bench/results/blas_threads.md).
+BLAS_LIMIT_THREATS = 250
+
+
+def _one_blas_thread(n_threats: int) -> ContextManager:
+    """BLAS held to one thread for a field of BLAS_LIMIT_THREATS or more, else nothing."""
+    if n_threats < BLAS_LIMIT_THREATS:
+        return nullcontext()
+    return _blas().limit(limits=1, user_api='blas')
+
+
+@lru_cache(maxsize=1)
+def _blas() -> ThreadpoolController:
+    """Return the loaded BLAS libraries, found once."""
+    from threadpoolctl import ThreadpoolController
+    return ThreadpoolController()
 
 
 #: Threats from which a process's first plan loads the kernels while it tetrahedralises
@@ -143,12 +166,6 @@ def _tiny_plan() -> None:
               PlannerConfig(), None)
     except Exception:  # noqa: BLE001 - a kernel it failed to load, the plan loads itself
         pass
-
-
-@lru_cache(maxsize=1)
-def _blas() -> ThreadpoolController:
-    """Return the loaded BLAS libraries, found once (finding them cost 0.9 ms a plan)."""
-    return ThreadpoolController()
 
 
 def _plan_warm(previous: PlanResult, threats: ThreatField, s: NDArray, t: NDArray, box: Box,

@@ -23,7 +23,7 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
-from threat_planner.core import _scipy_first  # noqa: F401,I100 (before any scipy)
+from threat_planner.core._scipy_first import unmasked  # noqa: I100 (before any scipy)
 from scipy.spatial import cKDTree, Delaunay, QhullError
 
 from threat_planner.core.network.graph_kernels import incentre_kernel
@@ -258,7 +258,8 @@ def _tetrahedralise(vertices: NDArray, n_threat_vertices: int,
     shift = vertices.mean(axis=0) if centre is None else centre
     local = vertices - shift
     try:
-        tri = Delaunay(local, qhull_options='Qbb Qc Qz Q12 Qt')
+        with unmasked():
+            tri = Delaunay(local, qhull_options='Qbb Qc Qz Q12 Qt')
     except QhullError as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else 'QhullError'
         raise PlanningError(f'partition: Qhull cannot tetrahedralise these points ({first})'
