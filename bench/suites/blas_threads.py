@@ -6,7 +6,9 @@ finding the BLAS libraries to limit cost 6-9 ms of a process's first plan (realp
 ~100 loaded libraries). This suite plans the 21 bundled cases (limits on) and big300_0
 plus 1,000 and 5,000 random threats, with ``threadpoolctl``'s one-thread limit and
 without, taking turns, on a quiet machine and beside two busy loops (the cores taken, as
-in CI's two test workers). Writes ``bench/results/blas_threads.md``.
+in CI's two test workers). Writes ``bench/results/blas_threads.md``. (Speed is not the
+only question: plans with an airspace differ with the thread count, so ``plan()`` holds
+them to one thread whatever this finds; see ``planner._one_blas_thread``.)
 
 Usage: ``python -m bench blas_threads [--rounds R]``
 """

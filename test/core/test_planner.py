@@ -171,18 +171,34 @@ def test_a_big_first_plan_loads_the_kernels_beside_the_delaunay_and_plans_the_sa
     assert out[1] == 'True True True'
 
 
-def test_blas_is_held_to_one_thread_from_blas_limit_threats_only():
+def _blas_threads() -> set[int]:
+    from threadpoolctl import ThreadpoolController
+    return {i['num_threads'] for i in ThreadpoolController().info() if i['user_api'] == 'blas'}
+
+
+def test_blas_is_held_to_one_thread_for_big_fields_and_airspace_only():
     """Below, the scan for BLAS libraries (6-9 ms of a first plan) bought no speed."""
     from threadpoolctl import ThreadpoolController
     from threat_planner.core.planner import _one_blas_thread, BLAS_LIMIT_THREATS
-
-    def threads() -> set[int]:
-        return {i['num_threads'] for i in ThreadpoolController().info()
-                if i['user_api'] == 'blas'}
     # The suite runs on one BLAS thread (conftest): two first, so the limit shows.
     with ThreadpoolController().limit(limits=2, user_api='blas'):
-        assert threads() == {2}
-        with _one_blas_thread(BLAS_LIMIT_THREATS):
-            assert threads() == {1}
-        with _one_blas_thread(BLAS_LIMIT_THREATS - 1):
-            assert threads() == {2}
+        assert _blas_threads() == {2}
+        for n, airspace, held in ((BLAS_LIMIT_THREATS, False, {1}), (20, True, {1}),
+                                  (BLAS_LIMIT_THREATS - 1, False, {2})):
+            with _one_blas_thread(n, airspace):
+                assert _blas_threads() == held, (n, airspace)
+
+
+@pytest.mark.parametrize('name', ['uniform20_0', 'clustered_0', 'air_geofence_0',
+                                  'air_spheres_0'])
+def test_plans_are_the_same_bit_for_bit_on_one_and_two_blas_threads(name):
+    """The airspace plans differed in the last digits (air_geofence_0: 87.90600 against
+    87.90798) until plan() held BLAS to one thread for them."""
+    from threadpoolctl import ThreadpoolController
+    sc = load_scenario(DATA / f'{name}.yaml')
+    js = []
+    for threads in (1, 2):
+        with ThreadpoolController().limit(limits=threads, user_api='blas'):
+            js.append(plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.5),
+                           airspace=sc.airspace).cost.J)
+    assert js[0] == js[1]
