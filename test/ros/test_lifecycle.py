@@ -66,6 +66,12 @@ def quiet_for(client, topic, seconds):
     return client.count(topic) == before
 
 
+def _our_nodes(client):
+    """Names of this test's nodes: the planner's namespace and any placeholder."""
+    return sorted(name for name, ns in client.node.get_node_names_and_namespaces()
+                  if ns == NS or name.startswith('_threat_planner_starting'))
+
+
 def service_offered(client):
     names = [n for n, _ in client.node.get_service_names_and_types()]
     return f'{NS}/plan_path' in names
@@ -95,6 +101,10 @@ def test_every_transition_and_what_each_state_publishes(client, tmp_path):
         threats.publish(cloud(SCENARIO.threats.positions, SCENARIO.threats.intensities))
 
         assert state_of(client) == State.PRIMARY_STATE_UNCONFIGURED
+        # The executable's placeholder node (its participant up before the imports) is
+        # gone once the node is there: the graph holds the node alone.
+        client.wait_until(lambda: _our_nodes(client) == ['threat_planner'], 10.0,
+                          f'the node alone in {NS}, not {_our_nodes(client)}')
         assert quiet_for(client, info_topic, 1.0)
         assert not bag.exists()
 

@@ -16,20 +16,25 @@ from typing import Optional
 __all__ = ['planner_lifecycle_node', 'planner_node']
 
 
-def _run(node_module: str, args: Optional[list[str]]) -> int:
+def _run(node_module: str, node_class: str, args: Optional[list[str]]) -> int:
     from threat_planner.ros.worker import prestart
     prestart()
-    return importlib.import_module(node_module).main(args)
+    # rclpy's context and participant come up before the node's own imports, so that DDS
+    # discovery runs beside them (see run_node's early_discovery).
+    from threat_planner.ros.interface import NODE_NAME
+    from threat_planner.ros.process import run_node
+    return run_node(lambda: getattr(importlib.import_module(node_module), node_class)(),
+                    NODE_NAME, args, early_discovery=True)
 
 
 def planner_node(args: Optional[list[str]] = None) -> int:
     """Run :class:`~threat_planner.ros.node.ThreatPlannerNode`; see its ``main``."""
-    return _run('threat_planner.ros.node', args)
+    return _run('threat_planner.ros.node', 'ThreatPlannerNode', args)
 
 
 def planner_lifecycle_node(args: Optional[list[str]] = None) -> int:
     """Run the managed node; its plan process waits, imported, for ``configure``."""
-    return _run('threat_planner.ros.lifecycle', args)
+    return _run('threat_planner.ros.lifecycle', 'ThreatPlannerLifecycleNode', args)
 
 
 _EXECUTABLES = {'planner_node': planner_node, 'planner_lifecycle_node': planner_lifecycle_node}
