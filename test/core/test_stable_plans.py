@@ -166,6 +166,21 @@ def test_a_finest_level_gone_astray_is_refined_again_subdivided():
     assert moved.cost.J <= (1.0 + TOLERANCE) * given.cost.J, (given.cost.J, moved.cost.J)
 
 
+def test_a_polished_finest_level_is_rerun_at_the_first_penalty_too():
+    """The same field moved 1 um (the bench's seed 1 of that size): the finest level ended
+    at 1601 against 388 at 20 segments; its rounds again at WARM_PENALTY ended 401.4 and
+    converged to 401.1, 0.50 % above the unmoved 399.1 (on 95affb9). At PENALTY_START they
+    end 399.4, converged 399.2; each rerun is converged before the lowest is kept (kept
+    unconverged, the lower rerun converged higher: the unmoved plan ended at 399.2)."""
+    bench, k, (_, threats, s, t, box, w) = _perturbation_case('n20 seed 1 w 0.8')
+    cfg = PlannerConfig(w=w)
+    given = plan(threats, s, t, box, cfg)
+    moved = plan(bench.nudged(threats, bench.SEEDS * k + 1, 1e-6), s, t, box, cfg)
+    assert given.feasible and moved.feasible
+    assert moved.cost.J <= (1.0 + TOLERANCE) * given.cost.J, (given.cost.J, moved.cost.J)
+    assert given.cost.J < 399.15, given.cost.J
+
+
 def test_equal_breaches_start_the_rounds_from_the_box_only_optimum():
     """n120 seed 0 w 0.8 of bench perturbation's random fields: the runner-up's box-only
     optimum and its seed broke the limits equally (0.866), and rounding chose which the

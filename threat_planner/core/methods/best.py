@@ -272,24 +272,27 @@ def _polish(p: Problem, best: Candidate) -> Candidate:
 
     Where the finest level ended more than UNSETTLED above the coarser level's J (a vertex
     pinned onto a start in a corner of the box, its segment folded to nothing), its rounds
-    run again from the coarser answer resampled (WARM_PENALTY, tolerance 1e-8; n20 seed 1
-    w 0.8: 1216 -> 400), and it is refined again from the coarsest answer with every level
-    subdivided (``subdivide``: linear resampling halves the turn radius at every coarse
-    vertex, and the finer rounds started far off it); the lowest usable one is kept. The
-    same field with every threat moved 1 nm: 452 and a rerun that broke a limit, then
-    395.8 subdivided (unmoved: 399.1). (A finest level that ended above the coarser J by
-    less is :func:`converge`'s to finish, as every other.)
+    run again from the coarser answer resampled (tolerance 1e-8; n20 seed 1 w 0.8: 1216 ->
+    400), at WARM_PENALTY and at PENALTY_START (moved 1 um: 401.4 and 399.4; unmoved
+    399.1), and it is refined again from the coarsest answer with every level subdivided
+    (``subdivide``: linear resampling halves the turn radius at every coarse vertex, and the
+    finer rounds started far off it; moved 1 nm: 452 and a rerun that broke a limit, then
+    395.8 subdivided). Each is converged (:func:`converge`) before the lowest usable one is
+    kept: the lowest unconverged one can converge higher than another (unmoved: 399.2
+    against 399.1). (A finest level that ended above the coarser J by less is
+    :func:`converge`'s to finish, as every other.)
     """
     if len(best.final) != p.config.n_points + 1 or not best.levels:
         return best
     if best.cost.J <= (1.0 + UNSETTLED) * p.cost(best.levels[-1]).J:
         return best
     n = p.config.n_points
-    for again in (refine(p, resample(best.levels[-1], n), best.seq, best.seed,
-                         tolerance=1e-8, warm=True, penalty=WARM_PENALTY),
+    coarser = resample(best.levels[-1], n)
+    for again in (*(refine(p, coarser, best.seq, best.seed, tolerance=1e-8, warm=True,
+                           penalty=mu) for mu in (WARM_PENALTY, PENALTY_START)),
                   refine(p, resample(best.levels[0], n), best.seq, best.seed,
                          box_broken=True, subdivide=True)):
-        best = _lower(best, again)
+        best = _lower(best, converge(p, again) if _usable(again) else again)
     return best
 
 
