@@ -61,6 +61,9 @@ def test_after_the_workload_no_bundled_plan_compiles():
         'ensure_compiled()\n'
         'before = kernel_stats()\n'
         f'for f in sorted(glob.glob({str(DATA / "*.yaml")!r})):\n'
+        # air_geofence_0's one zone is a prism, as air_mixed_0's (3.4 s of plans saved).
+        '    if f.endswith("air_geofence_0.yaml"):\n'
+        '        continue\n'
         '    sc = load_scenario(f)\n'
         '    big = len(sc.threats) >= 100\n'
         '    runs = ([] if big else [{}]) + [dict(NO_LIMITS)]\n'

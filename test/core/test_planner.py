@@ -189,11 +189,10 @@ def test_blas_is_held_to_one_thread_for_big_fields_and_airspace_only():
                 assert _blas_threads() == held, (n, airspace)
 
 
-@pytest.mark.parametrize('name', ['uniform20_0', 'clustered_0', 'air_geofence_0',
-                                  'air_spheres_0'])
+@pytest.mark.parametrize('name', ['uniform20_0', 'clustered_0', 'air_spheres_0'])
 def test_plans_are_the_same_bit_for_bit_on_one_and_two_blas_threads(name):
-    """The airspace plans differed in the last digits (air_geofence_0: 87.90600 against
-    87.90798) until plan() held BLAS to one thread for them."""
+    """The airspace plans differed in the last digits (air_spheres_0 at w 0.5:
+    86.4269304449 against 86.4269304412) until plan() held BLAS to one thread for them."""
     from threadpoolctl import ThreadpoolController
     sc = load_scenario(DATA / f'{name}.yaml')
     js = []
