@@ -2,8 +2,11 @@
 
 Each starts the node's first plan process (:func:`threat_planner.ros.worker.prestart`)
 before it imports rclpy, numpy and scipy, so the child's imports run beside the node's on
-the second core and the first picture finds the child ready sooner. This module imports
-nothing heavy: a spawned child runs the executable's script again, and pays only this.
+the second core and the first picture finds the child ready sooner. Then rclpy comes up,
+with its DDS participant, before the node's module is imported, so that discovery of the
+running nodes goes on during those imports (:func:`threat_planner.ros.process.run_node`).
+This module imports nothing heavy: a spawned child runs the executable's script again,
+and pays only this.
 
 ``python -m threat_planner.ros.entry planner_node [--ros-args ...]`` runs the same as
 ``ros2 run threat_planner planner_node``.
