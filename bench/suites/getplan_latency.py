@@ -26,9 +26,10 @@ import numpy as np
 from sensor_msgs.msg import PointCloud2
 
 from bench.toolkit.cases import random_scenario
+from bench.toolkit.checkouts import short_commit
 from bench.toolkit.node import (cloud, info, planner_command, pose, RosClient, ros_session,
                                 scenario_params, start_process, stop_process, VOLATILE)
-from bench.toolkit.repo import RESULTS
+from bench.toolkit.repo import RESULTS, ROOT
 from bench.toolkit.report import append_section, md_table
 
 
@@ -89,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--threats', type=int, nargs='+', default=[20, 1000])
     ap.add_argument('--calls', type=int, default=5)
-    ap.add_argument('--label', default='')
+    ap.add_argument('--label', default=None, help='section title (default: the commit)')
     ap.add_argument('--out', type=Path, default=RESULTS / 'getplan.md')
     args = ap.parse_args(argv)
     rows = []
@@ -104,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
                      ([r['threats'], r['calls'], f"{r['median_ms']:.0f}", f"{r['min_ms']:.0f}",
                        f"{r['max_ms']:.0f}", r['poses'], f"{r['first_plan_ms']:.0f}",
                        '; '.join(f'{s} {t:.0f}' for s, t, _ in r['replans'])] for r in rows))
-    append_section(args.out, f'{args.label} ({datetime.datetime.utcnow():%Y-%m-%d %H:%M} UTC, '
+    label = short_commit(ROOT) if args.label is None else args.label
+    append_section(args.out, f'{label} ({datetime.datetime.utcnow():%Y-%m-%d %H:%M} UTC, '
                    f'shared 2-core machine, load average {load} at the end)', table)
     return 0
