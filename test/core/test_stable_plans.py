@@ -20,6 +20,8 @@ cold). With the change every one of those replans is warm and none is higher (7 
 to 0.6 % lower: the replan refines the previous path further).
 """
 
+from functools import lru_cache
+
 from hypothesis import example, given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
@@ -152,16 +154,27 @@ def _perturbation_case(name: str):
     return bench, k, case
 
 
+@lru_cache(maxsize=None)
+def _unmoved_plan(name: str):
+    """The plan of a bench perturbation case as it is (planned once for every test)."""
+    _, _, (_, threats, s, t, box, w) = _perturbation_case(name)
+    return plan(threats, s, t, box, PlannerConfig(w=w))
+
+
+def _unmoved_and_moved(name: str, seed: int, size: float):
+    """The case's plan and its plan with every threat moved by `size` [m] (bench seed)."""
+    bench, k, (_, threats, s, t, box, w) = _perturbation_case(name)
+    moved = bench.nudged(threats, bench.SEEDS * k + seed, size)
+    return _unmoved_plan(name), plan(moved, s, t, box, PlannerConfig(w=w))
+
+
 def test_a_finest_level_gone_astray_is_refined_again_subdivided():
     """n20 seed 1 w 0.8 of bench perturbation's random fields, every threat moved 1 nm
     (its seed 1): the winner's finest level ended at J 452 against 392 at 20 segments,
     and its rounds again from that answer broke a limit, so the plan was 452, 13 % above
     the unmoved plan's 399.1 (on a2fc7e7). Refined again with every level subdivided
     (best._polish) it ends at 395.8."""
-    bench, k, (_, threats, s, t, box, w) = _perturbation_case('n20 seed 1 w 0.8')
-    cfg = PlannerConfig(w=w)
-    given = plan(threats, s, t, box, cfg)
-    moved = plan(bench.nudged(threats, bench.SEEDS * k + 1, 1e-9), s, t, box, cfg)
+    given, moved = _unmoved_and_moved('n20 seed 1 w 0.8', 1, 1e-9)
     assert given.feasible and moved.feasible
     assert moved.cost.J <= (1.0 + TOLERANCE) * given.cost.J, (given.cost.J, moved.cost.J)
 
@@ -172,10 +185,7 @@ def test_a_polished_finest_level_is_rerun_at_the_first_penalty_too():
     converged to 401.1, 0.50 % above the unmoved 399.1 (on 95affb9). At PENALTY_START they
     end 399.4, converged 399.2; each rerun is converged before the lowest is kept (kept
     unconverged, the lower rerun converged higher: the unmoved plan ended at 399.2)."""
-    bench, k, (_, threats, s, t, box, w) = _perturbation_case('n20 seed 1 w 0.8')
-    cfg = PlannerConfig(w=w)
-    given = plan(threats, s, t, box, cfg)
-    moved = plan(bench.nudged(threats, bench.SEEDS * k + 1, 1e-6), s, t, box, cfg)
+    given, moved = _unmoved_and_moved('n20 seed 1 w 0.8', 1, 1e-6)
     assert given.feasible and moved.feasible
     assert moved.cost.J <= (1.0 + TOLERANCE) * given.cost.J, (given.cost.J, moved.cost.J)
     assert given.cost.J < 399.15, given.cost.J
@@ -187,10 +197,7 @@ def test_equal_breaches_start_the_rounds_from_the_box_only_optimum():
     rounds started from: 490.4 unmoved, 408.5 with every threat moved 1 nm (on d18d96f).
     With optimisation.START_MARGIN both start from the box-only optimum and end together,
     near 405."""
-    bench, k, (_, threats, s, t, box, w) = _perturbation_case('n120 seed 0 w 0.8')
-    cfg = PlannerConfig(w=w)
-    given = plan(threats, s, t, box, cfg).cost.J
-    moved = plan(bench.nudged(threats, bench.SEEDS * k, 1e-9), s, t, box, cfg).cost.J
+    given, moved = (r.cost.J for r in _unmoved_and_moved('n120 seed 0 w 0.8', 0, 1e-9))
     assert abs(moved / given - 1.0) <= TOLERANCE and given < 410.0, (given, moved)
 
 

@@ -103,11 +103,11 @@ BLAS_LIMIT_THREATS = 250
 def _one_blas_thread(n_threats: int, airspace: bool) -> ContextManager:
     """Return a context holding BLAS to one thread for a big field or an airspace.
 
-    Plans with zones or terrain depend on the BLAS thread count (the
-    six airspace scenarios at w 0.5, one thread against two: J apart by up to 2.3e-5
-    relative), and from there by whole basins (a live airspace recording replayed 0.17 %
-    apart): they are planned on one thread, as their replays are. The other plans were
-    the same bit for bit on one and two threads (test_planner).
+    Plans with zones or terrain depend on the BLAS thread count (the six airspace
+    scenarios at w 0.5, one thread against two: J apart by up to 2.3e-5 relative), and
+    from there by whole basins (a live airspace recording replayed 0.17 % apart): they are
+    planned on one thread, as their replays are. The other plans were the same bit for bit
+    on one and two threads (test_planner).
     """
     if n_threats < BLAS_LIMIT_THREATS and not airspace:
         return nullcontext()
