@@ -82,7 +82,10 @@ def test_concurrent_requests_are_all_answered_in_order(node):
         f = cli.call_async(req)
         f.add_done_callback(lambda _, i=i: done.append(i))
         futures.append(f)
-    client.wait_until(lambda: all(f.done() for f in futures), 60.0, 'eight answers')
+    # A future is done before the executor has run its done callbacks: wait for those too
+    # (CI once read [0, ..., 6] with every future done and the last callback still due).
+    client.wait_until(lambda: all(f.done() for f in futures) and len(done) == 8, 60.0,
+                      'eight answers and their callbacks')
     assert done == list(range(8))
     for goal, frame, f in zip(goals, frames, futures):
         poses = f.result().plan.poses
