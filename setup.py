@@ -52,6 +52,8 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'bench', 'bench.*']),
+    # the Fast DDS discovery profile the executables load (threat_planner/ros/discovery.py)
+    package_data={'threat_planner.ros': ['fastdds_discovery.xml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

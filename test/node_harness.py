@@ -27,11 +27,10 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from threat_planner.ros.conversions import plan_info_values, pointcloud2_from_threats
+from threat_planner.ros.discovery import PROFILE, PROFILE_VARIABLES
 
 REPO = Path(__file__).resolve().parents[1]
 PYTHON = sys.executable
-#: Shortens Fast DDS discovery on localhost from ~3 s to ~0.1 s (see the file).
-FASTDDS_PROFILE = Path(__file__).resolve().parent / 'fastdds_local_discovery.xml'
 
 LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
@@ -74,10 +73,15 @@ def domain_id(offset: int, span: int = 40) -> int:
 
 
 def set_discovery_env(env) -> None:
-    """Discovery on this host only, with the fast-announcing profile, unless set already."""
+    """Discovery on this host only, with the package's fast-announcing profile.
+
+    The profile is set for the test's own participants too, which run no executable of the
+    package (:mod:`threat_planner.ros.discovery`); unless a profile is set already.
+    """
     # Only this machine: DDS discovery must not leave the host.
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    env.setdefault('FASTDDS_DEFAULT_PROFILES_FILE', str(FASTDDS_PROFILE))
+    for name in PROFILE_VARIABLES:
+        env.setdefault(name, str(PROFILE))
 
 
 def ros_env(domain: int, extra_pythonpath: Sequence[str] = ()) -> dict[str, str]:

@@ -19,6 +19,7 @@ import pytest
 from node_harness import domain_id, info, REPO, ros_env, RosClient, stop_process
 from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.ros.conversions import path_from_msg
+from threat_planner.ros.discovery import PROFILE_VARIABLES
 
 DOMAIN = domain_id(46)
 COLCON = Path(sys.executable).with_name('colcon')
@@ -68,6 +69,9 @@ def run_installed(install, executable, ros_args, log_path, cwd):
     env = ros_env(DOMAIN)
     # Only what local_setup.sh puts on the path: not the source tree.
     env.pop('PYTHONPATH', None)
+    # No profile from the harness: the executable loads its installed one.
+    for name in PROFILE_VARIABLES:
+        env.pop(name, None)
     script = install / 'threat_planner' / 'lib' / 'threat_planner' / executable
     command = '. "$1/local_setup.sh" && shift && exec "$@"'
     log = open(log_path, 'wb')
@@ -121,3 +125,6 @@ def test_installed_planner_plans_published_scenario(install, tmp_path):
         client.close()
     logs = (tmp_path / 'planner.log').read_text() + (tmp_path / 'publisher.log').read_text()
     assert codes == [0, 0], logs
+    # Both loaded the installed discovery profile, and Fast DDS parsed it.
+    assert logs.count('DDS discovery: announcing every 0.25 s') == 2, logs
+    assert 'XMLPARSER' not in logs, logs

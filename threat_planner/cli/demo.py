@@ -72,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from nav_msgs.msg import Path as PathMsg
     from sensor_msgs.msg import PointCloud2
 
+    from threat_planner.ros.discovery import apply_discovery_profile
     from threat_planner.ros.conversions import (path_from_msg, plan_info_values,
                                                 threats_from_pointcloud2)
     from threat_planner.cli.figures import plot_plan
@@ -87,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
     children = _children(args)
     exit_code = 0
     try:
+        apply_discovery_profile()
         rclpy.init(args=[])
         node = rclpy.create_node('threat_planner_demo')
 

@@ -16,6 +16,7 @@ from typing import Callable, Dict, List, Mapping, Optional, Tuple
 
 from threat_planner.errors import InputError, RecordingError, ThreatPlannerError
 from threat_planner.ros.conversions import plan_info_values
+from threat_planner.ros.discovery import apply_discovery_profile
 from threat_planner.ros.interface import INPUT_TOPICS, LATCHED
 from threat_planner.ros.parameters import as_declared
 from threat_planner.ros.recording.bagfile import Bag, level_name, PARAMETERS
@@ -188,6 +189,7 @@ def play_live(bag: Bag, *, rate: float = 1.0, namespace: Optional[str] = None,
                     None)
 
     context = Context()
+    apply_discovery_profile()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     node = executor = thread = None
     try:
