@@ -54,6 +54,8 @@ def test_install_layout(install):
     pkg = install / 'threat_planner'
     for script in ('planner_node', 'threat_publisher'):
         assert os.access(pkg / 'lib' / 'threat_planner' / script, os.X_OK), script
+    # package data: the discovery profile the executables load
+    assert list(pkg.glob('lib/python*/site-packages/threat_planner/ros/fastdds_discovery.xml'))
     share = pkg / 'share' / 'threat_planner'
     for rel in ('package.xml', 'config/planner.yaml', 'launch/planner.launch.py',
                 'scenarios/uniform20_0.yaml'):

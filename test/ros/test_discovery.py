@@ -44,6 +44,14 @@ def test_a_default_profile_file_in_the_working_folder_is_left_alone(tmp_path):
     assert discovery_profile_refusal({SWITCH: '1'}, tmp_path.parent) is None
 
 
+def test_a_missing_profile_file_is_not_set(tmp_path, monkeypatch):
+    import threat_planner.ros.discovery as discovery
+    monkeypatch.setattr(discovery, 'PROFILE', tmp_path / 'gone.xml')
+    env = {}
+    assert 'gone.xml is missing' in discovery.apply_discovery_profile(env, tmp_path)
+    assert env == {}
+
+
 def _participant_output(profile: Path) -> str:
     """Stderr and stdout of a process that brings up one participant with `profile`."""
     env = ros_env(DOMAIN)

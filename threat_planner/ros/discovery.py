@@ -53,6 +53,8 @@ def discovery_profile_refusal(environ: MutableMapping[str, str],
     for name in PROFILE_VARIABLES + ('ROS_DISCOVERY_SERVER',):
         if environ.get(name):
             return f'{name} is set'
+    if not PROFILE.is_file():
+        return f'{PROFILE} is missing'
     folder = Path.cwd() if cwd is None else cwd
     for name in _DEFAULT_FILES:
         if (folder / name).is_file():
