@@ -72,9 +72,9 @@ def run(args: argparse.Namespace) -> int:
     from nav_msgs.msg import Path as PathMsg
     from sensor_msgs.msg import PointCloud2
 
-    from threat_planner.ros.discovery import apply_discovery_profile
     from threat_planner.ros.conversions import (path_from_msg, plan_info_values,
                                                 threats_from_pointcloud2)
+    from threat_planner.ros.discovery import apply_discovery_profile
     from threat_planner.cli.figures import plot_plan
     from threat_planner.core.inputs.scenario import load_scenario
     from threat_planner.core.world.threats import ThreatField
