@@ -68,7 +68,9 @@ def _participant_output(profile: Path) -> str:
 def test_fast_dds_parses_the_profile_and_would_say_if_it_could_not(tmp_path):
     assert 'XMLPARSER' not in _participant_output(PROFILE)
     broken = tmp_path / 'broken.xml'
-    broken.write_text(PROFILE.read_text().replace('<count>10</count>', '<count>ten</count>'))
+    text = PROFILE.read_text()
+    broken.write_text(text.replace('<nanosec>250000000</nanosec>', '<nanosec>x</nanosec>'))
+    assert broken.read_text() != text
     assert 'XMLPARSER' in _participant_output(broken)
 
 

@@ -22,7 +22,7 @@ from typing import MutableMapping, Optional
 __all__ = ['PROFILE', 'PROFILE_VARIABLES', 'SWITCH', 'apply_discovery_profile',
            'discovery_profile_refusal']
 
-#: The profile: initial announcements 10 x 0.1 s, then one every 0.25 s.
+#: The profile: after Fast DDS's initial announcements, one every 0.25 s (not 3 s).
 PROFILE = Path(__file__).resolve().with_name('fastdds_discovery.xml')
 #: Fast DDS 2.x (Jazzy) reads the first, 3.x the second.
 PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE')
