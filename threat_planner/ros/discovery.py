@@ -1,10 +1,11 @@
 """Fast DDS discovery of the package's executables: announce every 0.25 s, not every 3 s.
 
 A participant that starts beside a running one is sometimes found only at the running
-one's next periodic announcement (Fast DDS 2.14: measured in 3-4 of 14 starts, a wait of
-1.1-3.2 s with the default period of 3 s, none over 1.1 s with 0.25 s on the running side;
-``bench/results/dds_discovery.md``). Each executable of this package therefore loads
-:data:`PROFILE` before rclpy starts, unless the user chose otherwise:
+one's next periodic announcement (Fast DDS 2.14, a probe subscribing to a publisher running
+for 3 s: 1.1-2.7 s in 4-7 of 14 starts with the default period of 3 s, none of 14 with
+0.25 s on the running side; ``bench/results/dds_discovery.md``). Each executable of this
+package therefore loads :data:`PROFILE` before rclpy starts, unless the user chose
+otherwise:
 
 * ``THREAT_PLANNER_DDS_PROFILE=0`` (or ``false``, ``off``) keeps Fast DDS's defaults;
 * a profile file of the user's (``FASTRTPS_DEFAULT_PROFILES_FILE``,
