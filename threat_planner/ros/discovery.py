@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import MutableMapping, Optional
+from typing import Mapping, MutableMapping, Optional
 
 __all__ = ['PROFILE', 'PROFILE_VARIABLES', 'SWITCH', 'apply_discovery_profile',
            'discovery_profile_refusal']
@@ -33,7 +33,7 @@ _FAST_DDS = ('rmw_fastrtps_cpp', 'rmw_fastrtps_dynamic_cpp')
 _DEFAULT_FILES = ('DEFAULT_FASTRTPS_PROFILES.xml', 'DEFAULT_FASTDDS_PROFILES.xml')
 
 
-def discovery_profile_refusal(environ: MutableMapping[str, str],
+def discovery_profile_refusal(environ: Mapping[str, str],
                               cwd: Optional[Path] = None) -> Optional[str]:
     """Return why :data:`PROFILE` must not be loaded here, or None if it may.
 
