@@ -25,7 +25,7 @@ import subprocess
 import sys
 import time
 
-from bench.suites.node_start import start_once
+from bench.suites.node_start import discovery_env, start_once
 from bench.toolkit.checkouts import short_commit
 from bench.toolkit.repo import DATA, machine, RESULTS, ROOT
 
@@ -54,32 +54,20 @@ rclpy.shutdown()
 """
 
 
-def _env(domain: int, profile: bool) -> dict:
-    """A process environment with the package's discovery profile or Fast DDS defaults."""
-    import bench.toolkit.node  # noqa: F401 - puts test/ on the path
-    from node_harness import ros_env
-    from threat_planner.ros.discovery import PROFILE_VARIABLES, SWITCH
-    env = ros_env(domain)
-    if not profile:
-        for name in PROFILE_VARIABLES:
-            env.pop(name, None)
-        env[SWITCH] = '0'
-    return env
-
-
 def probe_waits(domain: int, on_probe: bool, on_publisher: bool, probes: int) -> list:
     """Seconds from subscribing to the first message, for `probes` fresh probe processes."""
     from bench.toolkit.node import stop_process
     publisher = subprocess.Popen(
         [sys.executable, '-m', 'threat_planner.ros.publisher', '--ros-args', '-p',
-         f'scenario:={DATA / "uniform20_0.yaml"}'], env=_env(domain, on_publisher),
+         f'scenario:={DATA / "uniform20_0.yaml"}'], env=discovery_env(domain, on_publisher),
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
     waits = []
     try:
         time.sleep(3.0)
         for _ in range(probes):
-            done = subprocess.run([sys.executable, '-c', PROBE], env=_env(domain, on_probe),
-                                  capture_output=True, text=True, timeout=60)
+            done = subprocess.run([sys.executable, '-c', PROBE],
+                                  env=discovery_env(domain, on_probe), capture_output=True,
+                                  text=True, timeout=60)
             waits.append(float(done.stdout.split()[-1]) if done.stdout.split()
                          else float('nan'))
     finally:

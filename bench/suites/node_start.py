@@ -29,21 +29,32 @@ KEYS = (('kernels_s', ']: kernels: '), ('ready_s', ']: ready: '),
         ('first_path_s', ']: plan for input #'))
 
 
+def discovery_env(domain: int, profile: bool) -> dict:
+    """Return a ROS process environment with or without the package's discovery profile.
+
+    Without it (`profile` False) the process runs on Fast DDS's default timing
+    (:mod:`threat_planner.ros.discovery` switched off).
+    """
+    import bench.toolkit.node  # noqa: F401 - puts test/ on the path
+    from node_harness import ros_env
+    from threat_planner.ros.discovery import PROFILE_VARIABLES, SWITCH
+    env = ros_env(domain)
+    if not profile:
+        for name in PROFILE_VARIABLES:
+            env.pop(name, None)
+        env[SWITCH] = '0'
+    return env
+
+
 def start_once(tree: Path, work: Path, domain: int, publisher_first: bool,
                discovery_profile: bool = True) -> dict:
     """Start the node of `tree` and a publisher; return the seconds of :data:`KEYS`.
 
-    With `discovery_profile` False both run on Fast DDS's default discovery timing
-    (:mod:`threat_planner.ros.discovery` switched off), else on the package's profile.
+    Both run on the package's discovery profile, or on Fast DDS's defaults
+    (:func:`discovery_env`).
     """
-    from bench.toolkit.node import log_stamp, stop_process   # puts test/ on the path
-    from node_harness import ros_env
-    from threat_planner.ros.discovery import PROFILE_VARIABLES, SWITCH
-    env = ros_env(domain)
-    if not discovery_profile:
-        for name in PROFILE_VARIABLES:
-            env.pop(name, None)
-        env[SWITCH] = '0'
+    from bench.toolkit.node import log_stamp, stop_process
+    env = discovery_env(domain, discovery_profile)
     env['PYTHONPATH'] = os.pathsep.join([str(tree), env['PYTHONPATH']])
     has_entry = (tree / 'threat_planner' / 'ros' / 'entry.py').exists()
     node = [sys.executable, '-m'] + (['threat_planner.ros.entry', 'planner_node'] if has_entry
