@@ -29,6 +29,25 @@ def test_plan_prints_a_summary_and_writes_json_and_figure(tmp_path):
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
+def test_outputs_into_a_missing_folder_create_it(tmp_path):
+    # `make plan-demo` on a fresh clone: demo_out/ does not exist yet.
+    out = tmp_path / 'demo_out'
+    p = _run('plan', DATA / 'uniform20_0.yaml', '--json', out / 'plan.json',
+             '--plot', out / 'plan.png')
+    assert p.returncode == 0, p.stderr
+    assert json.loads((out / 'plan.json').read_text())['method'] == 'best'
+    assert (out / 'plan.png').is_file()
+
+
+def test_an_output_path_the_system_refuses_exits_2_with_one_line(tmp_path):
+    blocker = tmp_path / 'a_file'
+    blocker.write_text('')
+    p = _run('plan', DATA / 'uniform20_0.yaml', '--json', blocker / 'plan.json')
+    assert p.returncode == 2
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and 'a_file' in lines[0] and 'Traceback' not in p.stderr
+
+
 @pytest.mark.parametrize('method', ['paper', 'improved'])
 def test_plan_methods_and_k_options(tmp_path, method):
     out = tmp_path / 'p.json'

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 from typing import Optional
 
+from threat_planner.cli.options import output_file
 from threat_planner.errors import InputError
 
 __all__ = ['add_export_options', 'check_exports', 'export_plan']
@@ -75,15 +76,16 @@ def export_plan(args: argparse.Namespace, scenario, result, config,
     zones = scenario.airspace.zones
     if args.qgc:
         from threat_planner.export.qgc import write_qgc_plan
-        lines.append(f'  QGroundControl plan: {write_qgc_plan(args.qgc, path, datum, zones)}')
+        out = write_qgc_plan(output_file(args.qgc), path, datum, zones)
+        lines.append(f'  QGroundControl plan: {out}')
     if args.waypoints:
         from threat_planner.export.waypoints import write_waypoints
-        lines.append(f'  waypoints: {write_waypoints(args.waypoints, path, datum)}')
+        lines.append(f'  waypoints: {write_waypoints(output_file(args.waypoints), path, datum)}')
     if args.geojson:
         from threat_planner.export.geojson import write_geojson
         props = {'J': float(result.cost.J) if args.max_waypoints is None else float(c.J),
                  'feasible': bool(result.feasible), 'method': config.method}
-        out = write_geojson(args.geojson, path, datum, scenario.threats, zones,
+        out = write_geojson(output_file(args.geojson), path, datum, scenario.threats, zones,
                             scenario.name, props)
         lines.append(f'  GeoJSON: {out}')
     return lines

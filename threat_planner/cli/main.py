@@ -11,7 +11,6 @@ import atexit
 import json
 import math
 import os
-from pathlib import Path
 import sys
 import threading
 
@@ -19,7 +18,8 @@ from threat_planner.cli.bag import add_bag_commands
 from threat_planner.cli.batch import (add_batch_command, add_robust_options, robust_plan,
                                       robust_summary)
 from threat_planner.cli.exports import add_export_options, check_exports, export_plan
-from threat_planner.cli.options import add_planner_options, config_from, overrides, ProgressBar
+from threat_planner.cli.options import (add_planner_options, config_from, output_file,
+                                        overrides, ProgressBar)
 from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan
 from threat_planner.errors import ThreatPlannerError
@@ -73,7 +73,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     for line in export_plan(args, scenario, result, cfg, summary):
         print(line)
     if args.json:
-        Path(args.json).write_text(json.dumps(summary, indent=1))
+        output_file(args.json).write_text(json.dumps(summary, indent=1))
     if args.plot:
         from threat_planner.cli.figures import plot_plan
         plot_plan(args.plot, scenario.threats, scenario.box, scenario.start, scenario.goal,
@@ -127,7 +127,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(report.table())
     print(report.summary())
     if args.report:
-        Path(args.report).write_text(report.markdown())
+        output_file(args.report).write_text(report.markdown())
     return 0 if report.ok else 1
 
 
@@ -218,6 +218,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except ThreatPlannerError as exc:
+        print(f'threat-planner: error: {exc}', file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        raise   # the reader left: console's to handle, not a user error
+    except OSError as exc:
+        # An output (or input) file the system refused: the user's path, one line.
         print(f'threat-planner: error: {exc}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:

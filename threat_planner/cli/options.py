@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import replace
+from pathlib import Path
 import sys
 from typing import Optional
 
 from threat_planner.core.inputs.config import PlannerConfig
 from threat_planner.core.inputs.settings import PLANNER_SETTINGS, Setting
 
-__all__ = ['ProgressBar', 'add_planner_options', 'config_from', 'overrides']
+__all__ = ['ProgressBar', 'add_planner_options', 'config_from', 'output_file', 'overrides']
 
 #: Options whose flag inverts the setting (``--leave-box`` sets confine_to_box false).
 _INVERTED = {'confine_to_box': 'let the optimised path leave the bounds box'}
@@ -89,3 +90,10 @@ class ProgressBar:
         """Remove the bar, if it was drawn."""
         if self._bar is not None:
             self._bar.close()
+
+
+def output_file(name: str | Path) -> Path:
+    """Return an output file's path with its folder created, as ``--plot`` always had it."""
+    path = Path(name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
