@@ -23,6 +23,12 @@ where its J stayed within 1e-6 of the cold plan of the moved field or below.
 an older commit, for a before / after pair of reports written by this one suite): the
 package is imported only once ``main`` has put that checkout first on ``sys.path``.
 
+``--arithmetic other`` plans in a child process on another machine's arithmetic, as far as
+one machine can give it (:data:`OTHER_ARITHMETIC`: numpy's AVX2 loops instead of AVX-512,
+OpenBLAS's Haswell kernels, numba's JIT for a generic x86-64): the issue asks for the
+target on every CPU one can test on, and a plan that jumps with rounding jumps there.
+``--against ROWS`` (another run's ``--json``) adds each case's unmoved J on both sides.
+
 ``--quality BASE`` writes instead the quality gate of issue 28 (QUALITY_OUT): every bundled
 scenario (``test/data/*.yaml``, airspace ones with their zones and terrain) at w 0.2 / 0.5
 / 0.8, limits on and off (``big300_0`` off only), planned by BASE and by this checkout,
@@ -45,6 +51,11 @@ from bench.toolkit.repo import machine, RESULTS, ROOT
 from bench.toolkit.timing import timed
 
 OUT = RESULTS / 'perturbation.md'
+OTHER_OUT = RESULTS / 'perturbation_other_arithmetic.md'
+#: The environment of ``--arithmetic other``, read before numpy, OpenBLAS and numba load.
+OTHER_ARITHMETIC = {'NPY_DISABLE_CPU_FEATURES': 'X86_V4 AVX512_ICL AVX512_SPR',
+                    'OPENBLAS_CORETYPE': 'Haswell', 'NUMBA_CPU_NAME': 'generic',
+                    'THREAT_PLANNER_AOT': '0'}
 QUALITY_OUT = RESULTS / 'perturbation_quality.md'
 #: A bundled plan counts as higher when J rose by more than this fraction (the gate).
 QUALITY_SLACK = 1e-6
@@ -111,11 +122,16 @@ def _warm_ok(row: dict) -> bool:
     return row['warm'] and row['warm_J'] <= (1.0 + WARM_SLACK) * row['cold_J']
 
 
-def markdown(rows: list[dict], commit: str = '') -> str:
-    """Render perturbation.md."""
+def markdown(rows: list[dict], commit: str = '', arithmetic: str = 'host',
+             against: list[dict] | None = None) -> str:
+    """Render perturbation.md (``against``: the host's rows, for the unmoved J's table)."""
     sizes = list(rows[0]['ratios']) if rows else []
+    other = arithmetic != 'host'
+    how = (' with `--arithmetic other` (' + ', '.join(f'{k}={v}' for k, v in
+                                                      OTHER_ARITHMETIC.items()) + ')'
+           if other else '')
     lines = ['# J under 1 nm, 1 um and 1 mm moves of every threat', '',
-             f'Written by `python -m bench perturbation` on {time.strftime("%Y-%m-%d")} '
+             f'Written by `python -m bench perturbation`{how} on {time.strftime("%Y-%m-%d")} '
              f'(`{commit}`) on {machine()}. Every threat moved by the size in a random direction, '
              f'{SEEDS} such fields per case and size; cold plans of `best`; ratio = '
              'J(moved) / J(given), both exact. Worse = ratio above '
@@ -166,7 +182,43 @@ def markdown(rows: list[dict], commit: str = '') -> str:
             warm = 'warm' if row['warm'] else 'cold'
             lines.append(f'| {row["case"]} | {row["limits"]} | {row["J"]:.2f} | {ratios} | '
                          f'{row["seed"]} | {row["seeds_moved"][far][i]} ({far} m) | {warm} |')
+    if against:
+        lines += arithmetic_table(against, rows)
     return '\n'.join(lines) + '\n'
+
+
+def arithmetic_table(host: list[dict], other: list[dict]) -> list[str]:
+    """Lines comparing each case's unmoved J on the host's and the other arithmetic."""
+    mine = {(r['case'], r['limits']): r for r in host}
+    pairs = [(mine[key], r) for r in other if (key := (r['case'], r['limits'])) in mine]
+    if not pairs:
+        return []
+    ratio = [b['J'] / a['J'] for a, b in pairs]
+    apart = [(a, b, x) for (a, b), x in zip(pairs, ratio) if abs(x - 1.0) > WORSE]
+    same = sum(a['J'] == b['J'] for a, b in pairs)
+    lines = ['', '## The unmoved plans on both arithmetics', '',
+             f'{len(pairs)} cases: J bit for bit the same in {same}; more than {WORSE:g} '
+             f'apart in {len(apart)}; other / host from {min(ratio):.4f} to '
+             f'{max(ratio):.4f}.']
+    if apart:
+        lines += ['', '| case | limits | J host | J other | other / host | seed host | '
+                  'seed other |', '|---|---|---:|---:|---:|---|---|']
+        lines += [f'| {a["case"]} | {a["limits"]} | {a["J"]:.3f} | {b["J"]:.3f} | {x:.4f} | '
+                  f'{a["seed"]} | {b["seed"]} |' for a, b, x in apart]
+    return lines
+
+
+def _other_arithmetic(argv: list[str]) -> list[dict]:
+    """Run the cases in a child under OTHER_ARITHMETIC; return its rows."""
+    import os
+    import subprocess
+    import tempfile
+    with tempfile.TemporaryDirectory() as work:
+        path = Path(work) / 'rows.json'
+        env = {**os.environ, **OTHER_ARITHMETIC}
+        subprocess.run([sys.executable, '-m', 'bench', 'perturbation', *argv,
+                        '--rows-json', str(path)], check=True, cwd=ROOT, env=env)
+        return json.loads(path.read_text())
 
 
 def bundled_plans() -> dict:
@@ -239,7 +291,12 @@ def main(argv: list[str] | None = None) -> None:
                     help="plan with this checkout's threat_planner")
     ap.add_argument('--quality', type=Path, default=None, metavar='BASE',
                     help='the quality gate instead: bundled plans of BASE and of this checkout')
+    ap.add_argument('--arithmetic', choices=('host', 'other'), default='host',
+                    help="'other': plan under OTHER_ARITHMETIC in a child process")
+    ap.add_argument('--against', type=Path, default=None, metavar='ROWS',
+                    help="the host's rows (--json of a host run): each unmoved J on both")
     ap.add_argument('--bundled-json', type=Path, default=None, help=argparse.SUPPRESS)
+    ap.add_argument('--rows-json', type=Path, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.quality is not None:
         return _quality(args.quality, args.out or QUALITY_OUT)
@@ -249,9 +306,15 @@ def main(argv: list[str] | None = None) -> None:
     if args.bundled_json is not None:
         args.bundled_json.write_text(json.dumps(bundled_plans()))
         return None
-    args.out = args.out or OUT
-    rows = run(tuple(args.limits))
-    args.out.write_text(markdown(rows, short_commit(tree)))
+    if args.rows_json is not None:
+        args.rows_json.write_text(json.dumps(run(tuple(args.limits))))
+        return None
+    other = args.arithmetic == 'other'
+    args.out = args.out or (OTHER_OUT if other else OUT)
+    limits = ['--limits', *args.limits] + (['--tree', str(tree)] if args.tree else [])
+    rows = _other_arithmetic(limits) if other else run(tuple(args.limits))
+    against = json.loads(args.against.read_text()) if args.against else None
+    args.out.write_text(markdown(rows, short_commit(tree), args.arithmetic, against))
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1))
     print(f'wrote {args.out}')

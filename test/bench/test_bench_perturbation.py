@@ -48,3 +48,28 @@ def test_the_report_counts_cases_and_plans_that_moved_and_warm_replans():
     assert '| off | 1 | 1 | 0 | 0 | 0 | 0 | nan |' in text
     listed = [line for line in text.splitlines() if line.startswith('| a@0.2 |')]
     assert len(listed) == 1 and '1.0000 / 1.2000 / 0.9900 ; 1.0000' in listed[0]
+
+
+def test_the_arithmetic_table_lists_the_cases_whose_unmoved_plan_differs():
+    host = [_row('a@0.2', 'on', ([1.0] * 3, [1.0] * 3)), _row('b', 'on', ([1.0] * 3, [1.0] * 3))]
+    other = [dict(host[0]), dict(host[1], J=10.05, seed='surface route 1')]
+    lines = rp.arithmetic_table(host, other)
+    assert '2 cases: J bit for bit the same in 1; more than 0.001 apart in 1; other / host ' \
+           'from 1.0000 to 1.0050.' in lines
+    assert lines[-1] == '| b | on | 10.000 | 10.050 | 1.0050 | route 0 | surface route 1 |'
+    assert rp.arithmetic_table(host, [_row('c', 'on', ([1.0] * 3, [1.0] * 3))]) == []
+    assert 'unmoved plans on both' in rp.markdown(other, arithmetic='other', against=host)
+
+
+def test_the_other_arithmetic_reaches_numpy_and_numba_in_the_child():
+    """The variables are read at import: a child started with them runs without AVX-512
+    loops in numpy and compiles numba's kernels for a generic x86-64."""
+    import os
+    import subprocess
+    probe = ('import numpy, numba\n'
+             'from numpy._core._multiarray_umath import __cpu_features__ as f\n'
+             'print(f.get("X86_V4", False), f.get("AVX512_ICL", False), '
+             'numba.config.CPU_NAME)')
+    out = subprocess.run([sys.executable, '-c', probe], capture_output=True, text=True,
+                         env={**os.environ, **rp.OTHER_ARITHMETIC}, check=True).stdout
+    assert out.split() == ['False', 'False', 'generic']
