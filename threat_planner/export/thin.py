@@ -59,7 +59,9 @@ def _deviation(path: NDArray, a: int, b: int) -> tuple[int, float]:
     p, q = path[a], path[b]
     d = q - p
     inner = path[a + 1:b]
-    t = np.clip((inner - p) @ d / max(float(d @ d), 1e-300), 0.0, 1.0)
+    # einsum, not @: BLAS sums in a CPU's own order, and the kept points would follow it.
+    t = np.clip(np.einsum('ik,k->i', inner - p, d) / max(float(np.einsum('k,k->', d, d)), 1e-300),
+                0.0, 1.0)
     dist = np.linalg.norm(inner - p - t[:, None] * d, axis=1)
     k = int(np.argmax(dist))
     return a + 1 + k, float(dist[k])

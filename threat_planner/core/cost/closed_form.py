@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from threat_planner.core._vector import rows_dot
+
 #: Pairs evaluated at once by the pair-wise costs.
 PAIR_CHUNK = 262_144
 #: Threats whose closest approach to a segment is below this are treated as hit [m].
@@ -226,7 +228,8 @@ def segment_threat_costs(a: NDArray, b: NDArray, positions: NDArray,
         return out
     step = max(1, chunk // n)
     for s in range(0, len(a), step):
-        out[s:s + step] = segment_integrals(a[s:s + step], b[s:s + step], positions) @ intensities
+        out[s:s + step] = rows_dot(
+            segment_integrals(a[s:s + step], b[s:s + step], positions), intensities)
     return out
 
 
@@ -297,7 +300,7 @@ def _dense_gradient(a: NDArray, b: NDArray, positions: NDArray, f: NDArray
     lcol = length[:, None]
     g = _Geometry(np.broadcast_to(lcol, h.shape), None, t1, t1 + lcol, h, None)
     i2, i3 = _integrals(g)
-    j_r = float((i2 @ f).sum())
+    j_r = float(rows_dot(i2, f).sum())
     if not np.isfinite(j_r):
         zero = np.zeros_like(a)
         return j_r, zero, zero
@@ -315,7 +318,7 @@ def _dense_gradient(a: NDArray, b: NDArray, positions: NDArray, f: NDArray
 
     def along_d(coef: NDArray) -> NDArray:
         # sum_n coef * (a - p_n - t1 u) without forming the (S, N, 3) array
-        return (a * coef.sum(axis=1)[:, None] - coef @ positions
+        return (a * coef.sum(axis=1)[:, None] - rows_dot(coef, positions)
                 - (coef * t1).sum(axis=1)[:, None] * u)
 
     with np.errstate(over='ignore', invalid='ignore'):

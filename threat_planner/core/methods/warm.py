@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from threat_planner.core._vector import vector_length
 from threat_planner.core.optimise.optimisation import is_crowded
 from threat_planner.core.optimise.smoothing import resample
 from threat_planner.core.world.threats import Box, ThreatField
@@ -93,7 +94,7 @@ def warm_path(previous: object, threats: ThreatField, s: NDArray, t: NDArray, bo
     diag = box.diagonal
     if not (np.array_equal(box.lo, p_box.lo) and np.array_equal(box.hi, p_box.hi)):
         return None, 'cold: bounds changed'
-    if np.linalg.norm(t - p_goal) > 1e-9 * diag:
+    if vector_length(t - p_goal) > 1e-9 * diag:
         return None, 'cold: goal moved'
     if len(threats) != len(p_threats) or not np.allclose(
             threats.intensities, p_threats.intensities, rtol=1e-9, atol=0.0):

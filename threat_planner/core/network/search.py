@@ -17,6 +17,7 @@ from threat_planner.core import _scipy_first  # noqa: F401,I100 (before any scip
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from threat_planner.core._vector import rows_dot, vector_length
 from threat_planner.core.cost.kernels import segment_costs as compiled_costs
 from threat_planner.core.cost.near_kernels import near_segment_costs
 from threat_planner.core.network.graph_kernels import Graph
@@ -145,20 +146,20 @@ def spread_nodes(network: Network, point: NDArray, toward: NDArray, k: int) -> N
     rel = network.nodes[pool] - point
     dist = np.linalg.norm(rel, axis=1)
     axis = np.asarray(toward, float) - point
-    length = float(np.linalg.norm(axis))
+    length = vector_length(axis)
     if length > 0:
         axis = axis / length
-        ahead = rel @ axis > 0
+        ahead = rows_dot(rel, axis) > 0
         if ahead.sum() >= k:
             pool, rel, dist = pool[ahead], rel[ahead], dist[ahead]
     else:
         axis = np.array([1.0, 0.0, 0.0])
     # Sector 0 starts at the world's up direction seen across the axis (x if the axis is up).
     up = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    e1 = up - (up @ axis) * axis
-    e1 /= np.linalg.norm(e1)
+    e1 = up - float(rows_dot(up, axis)) * axis
+    e1 /= vector_length(e1)
     e2 = np.cross(axis, e1)
-    phi = np.mod(np.arctan2(rel @ e2, rel @ e1) + np.pi / k, 2 * np.pi)
+    phi = np.mod(np.arctan2(rows_dot(rel, e2), rows_dot(rel, e1)) + np.pi / k, 2 * np.pi)
     sector = np.minimum((phi / (2 * np.pi / k)).astype(np.int64), k - 1)
     order = np.argsort(dist, kind='stable')
     chosen: list[int] = []

@@ -141,7 +141,7 @@ def _resample(points, n_segments, out):
     cum = np.zeros(m)
     for k in range(1, m):
         d = points[k] - points[k - 1]
-        cum[k] = cum[k - 1] + math.sqrt(d @ d)
+        cum[k] = cum[k - 1] + math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     total = cum[m - 1]
     j = 0
     for q in range(n_segments + 1):

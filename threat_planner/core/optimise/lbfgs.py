@@ -40,6 +40,15 @@ _MAX_BACKTRACKS = 40
 
 
 @njit(cache=True)
+def _sum_squares(v):
+    """Sum of v's squares in index order (np.dot calls BLAS: core/_vector.py)."""
+    total = 0.0
+    for k in range(v.shape[0]):
+        total += v[k] * v[k]
+    return total
+
+
+@njit(cache=True)
 def _objective(x, n1, positions, f, w, seg, thr, c2, c3, spring, even, scale, lim, lam, mu,
                gbuf, pgrad, grad, parts):
     """Scaled J + spacing terms (+ the limits' PHR term if lim[6]); gradient into grad.
@@ -220,7 +229,7 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
                     yy += tmp2[k] * xn[k]
                 gamma = 1.0 / (rho[last] * yy) if yy > 0 else 1.0
             else:
-                gamma = 1.0 / math.sqrt(np.dot(tmp, tmp))
+                gamma = 1.0 / math.sqrt(_sum_squares(tmp))
             for k in range(nv):
                 d[k] = tmp[k] * gamma
         else:
@@ -231,7 +240,7 @@ def _minimise(x0, lo, hi, positions, f, w, seg, thr, c2, c3, spring, even, scale
                     yy += y_mem[last, k] * y_mem[last, k] * free[k]
                 gamma = 1.0 / (rho[last] * yy) if yy > 0 else 1.0
             else:
-                gamma = 1.0 / math.sqrt(np.dot(d, d))
+                gamma = 1.0 / math.sqrt(_sum_squares(d))
             for k in range(nv):
                 d[k] *= gamma
         for i in range(count - 1, -1, -1):

@@ -27,21 +27,31 @@ DEGENERATE = 1e-12
 
 
 @njit(cache=True)
+def _dot3(a, b):
+    """Return a . b of two 3-vectors, summed in one order (numba's ``@`` calls BLAS).
+
+    See core/_vector.py.
+    """
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
 def _fillet(a, b, share):
     """Radius [m] of the arc tangent to segments a, b within ``share`` of their vertex.
 
     share / tan(theta / 2), theta the turn between them.
     """
-    la = math.sqrt(a @ a)
-    lb = math.sqrt(b @ b)
+    la = math.sqrt(_dot3(a, a))
+    lb = math.sqrt(_dot3(b, b))
     cx = a[1] * b[2] - a[2] * b[1]
     cy = a[2] * b[0] - a[0] * b[2]
     cz = a[0] * b[1] - a[1] * b[0]
     cross = math.sqrt(cx * cx + cy * cy + cz * cz)
     # tan(theta / 2) = |a x b| / (|a| |b| + a . b): straight on 0, straight back inf.
-    along = la * lb + a @ b
+    ab = _dot3(a, b)
+    along = la * lb + ab
     if cross <= 1e-15 * la * lb:
-        return math.inf if a @ b >= 0 else 0.0
+        return math.inf if ab >= 0 else 0.0
     if along <= 0.0:
         return 0.0
     return share * along / cross
@@ -69,15 +79,15 @@ def _measure(points, floor_z):
     keep[0] = 0
     for s in range(n):
         d = points[s + 1] - points[s]
-        if math.sqrt(d @ d) > DEGENERATE * longest:
+        if math.sqrt(_dot3(d, d)) > DEGENERATE * longest:
             keep[m] = s + 1
             m += 1
     radius = math.inf
     for k in range(1, m - 1):
         a = points[keep[k]] - points[keep[k - 1]]
         b = points[keep[k + 1]] - points[keep[k]]
-        share = min(math.sqrt(a @ a) * (1.0 if k == 1 else 0.5),
-                    math.sqrt(b @ b) * (1.0 if k == m - 2 else 0.5))
+        share = min(math.sqrt(_dot3(a, a)) * (1.0 if k == 1 else 0.5),
+                    math.sqrt(_dot3(b, b)) * (1.0 if k == m - 2 else 0.5))
         radius = min(radius, _fillet(a, b, share))
     alt = math.inf
     for i in range(1, n):

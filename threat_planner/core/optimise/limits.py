@@ -35,6 +35,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from threat_planner.core._vector import vector_length
 from threat_planner.core.optimise.limit_kernels import _EPS, DEGENERATE, LimitTerm, measure
 
 __all__ = ['FlightLimits', 'LimitCheck', 'check_limits', 'climb_angles', 'meets_limits',
@@ -250,7 +251,7 @@ def _blocks(points: NDArray, limits: FlightLimits
     # dh/dd; a vertical segment has no horizontal direction, so take the start-goal one
     # (any horizontal unit vector is a subgradient; a zero one would be a false optimum).
     axis = p[-1, :2] - p[0, :2]
-    axis = axis / np.linalg.norm(axis) if np.linalg.norm(axis) > 0 else np.array([1.0, 0.0])
+    axis = axis / vector_length(axis) if vector_length(axis) > 0 else np.array([1.0, 0.0])
     dh = np.zeros_like(d)
     flat = h > 0
     dh[flat, :2] = d[flat, :2] / h[flat, None]

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from threat_planner.core._vector import vector_length
 from threat_planner.core.optimise import chain_kernels
 
 
@@ -181,7 +182,7 @@ def smooth(points: NDArray, positions: NDArray, intensities: NDArray, k: float,
     dt = 0.5 * np.sqrt(mass / k)
     # Drag near critical for the slowest chain mode (omega = 2 sqrt(k/M) sin(pi / 2n)).
     drag = 2.0 * mass * 2.0 * np.sqrt(k / mass) * np.sin(np.pi / (2 * n))
-    spacing = float(np.linalg.norm(x[-1] - x[0])) / n
+    spacing = vector_length(x[-1] - x[0]) / n
     spacing = max(spacing, float(np.linalg.norm(np.diff(x, axis=0), axis=1).mean()), 1e-9)
     # Compiled (chain_kernels): every step in one call, the forces as chain_forces'.
     x, steps, converged = chain_kernels.integrate(

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from threat_planner.core._vector import vector_length
 from threat_planner.errors import InputError
 
 if TYPE_CHECKING:  # imported where a tree is built: scipy.spatial is 0.3 s to import
@@ -118,13 +119,13 @@ class Box:
     def around(cls, points: NDArray, margin: float = 0.1) -> 'Box':
         """Smallest box holding the points, grown by a fraction of its diagonal."""
         lo, hi = points.min(axis=0), points.max(axis=0)
-        pad = max(margin * float(np.linalg.norm(hi - lo)), 1.0)
+        pad = max(margin * vector_length(hi - lo), 1.0)
         return cls(lo - pad, hi + pad)
 
     @cached_property
     def diagonal(self) -> float:
         """Length of the box's diagonal [m]."""
-        return float(np.linalg.norm(self.hi - self.lo))
+        return vector_length(self.hi - self.lo)
 
     @cached_property
     def volume(self) -> float:
