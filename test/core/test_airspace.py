@@ -333,3 +333,17 @@ def test_plot_draws_zones_terrain_and_masked_parts(tmp_path):
     out = tmp_path / 'plan.png'
     assert main(['plan', str(DATA / 'air_mixed_0.yaml'), '--plot', str(out)]) == 0
     assert out.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_slsqp_aims_inside_the_limits_so_the_exact_check_passes():
+    """air_geofence_0 at w 0.5 with the default limits: SLSQP, given the limits themselves,
+    ended 2.1 mm short of the 10 m turn radius (0.3 mm and 1.4 mm on OpenBLAS's Haswell
+    and Prescott kernels), so the plan came out infeasible; aiming at best's margins
+    (in_airspace._aim) it meets every limit at J 87.93 against 87.91."""
+    from threat_planner.core.optimise.limits import check_limits, FlightLimits
+    sc = load_scenario(DATA / 'air_geofence_0.yaml')
+    cfg = PlannerConfig(w=0.5)
+    r = plan(sc.threats, sc.start, sc.goal, sc.box, cfg, airspace=sc.airspace)
+    assert r.feasible, r.limit_check.violations
+    assert check_limits(r.path, FlightLimits.of(cfg), float(sc.box.lo[2])).feasible
+    assert not sc.airspace.violations(r.path)
