@@ -116,10 +116,11 @@ def test_exact_twin_same_inputs_and_plan(tmp_path, zones, configs):
 
 
 # Moved through WGS84 the inputs change by ~1e-9 m (round-off), and some plans answer with
-# another basin: with the limits on, uniform20_0 gives J 155.0321 against 155.0574 (1.6e-4),
+# another basin: with the limits on, uniform20_0 gave J 155.0321 against 155.0574 (1.6e-4),
 # and air_mixed_0 85.1527 against 85.1546 (limits on) or 85.0306 against 85.0391 (off).
 # That is the planner's sensitivity to round-off, not the conversion's (the exact twin above
-# holds); those cases are left out rather than the tolerance loosened.
+# holds); those cases are left out here rather than the tolerance loosened, and held to
+# issue 28's 0.1 % below.
 @pytest.mark.parametrize('name, limits', [('uniform20_0', 'limits off'),
                                           ('weak20_0', 'limits off')])
 def test_bundled_scenario_on_wgs84_plans_the_same(name, limits):
@@ -134,6 +135,20 @@ def test_bundled_scenario_on_wgs84_plans_the_same(name, limits):
     pg, pl = plan_of(g, CONFIGS[limits]), plan_of(loc, CONFIGS[limits])
     assert abs(pg.cost.J - pl.cost.J) <= 1e-6 * pl.cost.J, (pg.cost.J, pl.cost.J)
     assert np.abs(pg.path - pl.path).max() < 1e-3
+
+
+@pytest.mark.parametrize('name', ['uniform20_0', 'uniform20_1', 'weak20_0', 'clustered_0',
+                                  'ground_0', 'strongweak_0', 'coplanar_0'])
+def test_a_wgs84_twin_with_the_limits_on_plans_within_a_tenth_of_a_percent(name):
+    """Issue 28's target for a geodetic twin. Measured at 606028b (no BLAS in the
+    arithmetic), the seven 20-threat scenarios plan within 1.7e-5 of their local J
+    (uniform20_0: 154.8752 against 154.8778; 1.6e-4 on earlier code)."""
+    doc = yaml.safe_load((DATA / f'{name}.yaml').read_text())
+    loc = scenario_from_dict(doc, str(DATA / f'{name}.yaml'))
+    g = scenario_from_dict(geodetic_twin(doc), str(DATA / f'{name}.yaml'))
+    pg, pl = plan_of(g, CONFIGS['limits on']), plan_of(loc, CONFIGS['limits on'])
+    assert pg.feasible and pl.feasible
+    assert abs(pg.cost.J / pl.cost.J - 1.0) <= 1e-3, (pg.cost.J, pl.cost.J)
 
 
 def test_cylinders_and_prisms_stand_vertical_outline_at_mid_height_heights_at_centre():
