@@ -210,19 +210,6 @@ def arithmetic_table(host: list[dict], other: list[dict]) -> list[str]:
     return lines
 
 
-def _other_arithmetic(argv: list[str]) -> list[dict]:
-    """Run the cases in a child under OTHER_ARITHMETIC; return its rows."""
-    import os
-    import subprocess
-    import tempfile
-    with tempfile.TemporaryDirectory() as work:
-        path = Path(work) / 'rows.json'
-        env = {**os.environ, **OTHER_ARITHMETIC}
-        subprocess.run([sys.executable, '-m', 'bench', 'perturbation', *argv,
-                        '--rows-json', str(path)], check=True, cwd=ROOT, env=env)
-        return json.loads(path.read_text())
-
-
 def bundled_plans() -> dict:
     """Return {case: [J, feasible, seed]} of every bundled scenario, w and limits."""
     from threat_planner import load_scenario, plan, PlannerConfig
@@ -267,17 +254,21 @@ def quality_markdown(before: dict, after: dict, trees: tuple[str, str]) -> str:
     return '\n'.join(lines) + '\n'
 
 
-def _quality(base: Path, out: Path) -> None:
-    """Plan the bundled scenarios with `base` and with this checkout; write the table."""
+def _child(argv: list[str], flag: str, env: dict | None = None):
+    """Run this suite in a child with ``argv``; return what it wrote through ``flag``."""
+    import os
     import subprocess
     import tempfile
-    found = []
     with tempfile.TemporaryDirectory() as work:
-        for i, tree in enumerate((base.resolve(), ROOT)):
-            path = Path(work) / f'{i}.json'
-            subprocess.run([sys.executable, '-m', 'bench', 'perturbation', '--tree', str(tree),
-                            '--bundled-json', str(path)], check=True, cwd=ROOT)
-            found.append(json.loads(path.read_text()))
+        path = Path(work) / 'out.json'
+        subprocess.run([sys.executable, '-m', 'bench', 'perturbation', *argv, flag, str(path)],
+                       check=True, cwd=ROOT, env={**os.environ, **(env or {})})
+        return json.loads(path.read_text())
+
+
+def _quality(base: Path, out: Path) -> None:
+    """Plan the bundled scenarios with `base` and with this checkout; write the table."""
+    found = [_child(['--tree', str(tree)], '--bundled-json') for tree in (base.resolve(), ROOT)]
     out.write_text(quality_markdown(*found, (short_commit(base), short_commit(ROOT))))
     print(f'wrote {out}')
 
@@ -314,7 +305,8 @@ def main(argv: list[str] | None = None) -> None:
     other = args.arithmetic == 'other'
     args.out = args.out or (OTHER_OUT if other else OUT)
     limits = ['--limits', *args.limits] + (['--tree', str(tree)] if args.tree else [])
-    rows = _other_arithmetic(limits) if other else run(tuple(args.limits))
+    rows = (_child(limits, '--rows-json', OTHER_ARITHMETIC) if other
+            else run(tuple(args.limits)))
     against = json.loads(args.against.read_text()) if args.against else None
     args.out.write_text(markdown(rows, short_commit(tree), args.arithmetic, against))
     if args.json is not None:

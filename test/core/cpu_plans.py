@@ -20,7 +20,8 @@ from threat_planner.core.world.threats import Box, ThreatField
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'data')
 
 
-def _corner_field():
+def corner_switchback():
+    """bench perturbation's n20 seed 1 w 0.8: threats, start, goal and box."""
     rng = np.random.default_rng([101, 20])
     positions, intensities = rng.uniform(0.0, 100.0, (20, 3)), rng.uniform(1e5, 4e5, 20)
     rng = np.random.default_rng([20, 1])
@@ -45,7 +46,7 @@ def main() -> None:
         for key, cfg in runs:
             r = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
             out[key] = [r.cost.J, r.path.tolist()]
-    threats, s, t, box = _corner_field()
+    threats, s, t, box = corner_switchback()
     r = plan(threats, s, t, box, PlannerConfig(w=0.8))
     out['n20 seed 1 w 0.8 on'] = [r.cost.J, r.path.tolist()]
     print(json.dumps(out))

@@ -26,6 +26,7 @@ from hypothesis import example, given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 
+from cpu_plans import corner_switchback
 from threat_planner.core.planner import plan, PlannerConfig
 from threat_planner.core.world.threats import Box, ThreatField
 
@@ -228,24 +229,13 @@ def test_a_looser_climb_limit_never_plans_higher(name, w):
     assert not rises, rises
 
 
-def _corner_switchback():
-    """bench perturbation's n20 seed 1 w 0.8: threats, start, goal and box."""
-    rng = np.random.default_rng([101, 20])
-    positions, intensities = rng.uniform(0.0, 100.0, (20, 3)), rng.uniform(1e5, 4e5, 20)
-    rng = np.random.default_rng([20, 1])
-    s = np.array([0.0, 0.0, rng.uniform(0.0, 100.0)])
-    t = np.array([100.0, 100.0, rng.uniform(0.0, 100.0)])
-    threats = ThreatField.from_arrays(positions, intensities * rng.uniform(0.3, 3.0, 20))
-    return threats, s, t, Box.from_corners([0.0] * 3, [100.0] * 3)
-
-
 def test_rounds_held_by_a_folded_vertex_go_on():
     """The same field with every threat moved 1 nm (the bench's seed 106): a vertex of the
     finest level folded 1.5e-5 m onto the start, six rounds ended at one J and violation
     (437.50, 0.085) and the plan came out at J 1691.3, 4.23x the unmoved 399.4 (3470672).
     Unfolded when a round stalls, it is 452.1 (1.13x: the finest level still lands in
     other places as the threats move by nanometres, bench/results/perturbation.md)."""
-    threats, s, t, box = _corner_switchback()
+    threats, s, t, box = corner_switchback()
     d = np.random.default_rng(106).normal(size=threats.positions.shape)
     d *= 1e-9 / np.linalg.norm(d, axis=1)[:, None]
     moved = ThreatField.from_arrays(threats.positions + d, threats.intensities)
@@ -259,7 +249,7 @@ def test_a_winner_far_above_its_coarse_answer_is_refined_again_from_it(monkeypat
     stalled there and the plan came out at J 1216 (its 1 um twins 396 to 3444); run again
     from the coarser level's answer it is 400 (best.UNSETTLED)."""
     from threat_planner.core.methods import best
-    threats, s, t, box = _corner_switchback()
+    threats, s, t, box = corner_switchback()
     again = plan(threats, s, t, box, PlannerConfig(w=0.8))
     monkeypatch.setattr(best, 'UNSETTLED', np.inf)
     once = plan(threats, s, t, box, PlannerConfig(w=0.8))

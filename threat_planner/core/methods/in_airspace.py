@@ -33,7 +33,7 @@ from threat_planner.core.network.partition import Network
 from threat_planner.core.network.search import alternative_routes, EdgeCosts
 from threat_planner.core.optimise.limits import (constraint_jacobian, constraint_values,
                                                  FlightLimits)
-from threat_planner.core.optimise.optimisation import ANGLE_MARGIN_DEG, RADIUS_MARGIN
+from threat_planner.core.optimise.optimisation import aim
 from threat_planner.core.optimise.smoothing import check_angles, resample
 from threat_planner.core.world.airspace import Airspace
 from threat_planner.errors import PlanningError
@@ -316,7 +316,10 @@ def plan_in_airspace(p: Problem) -> Candidate:
     best = None
     for _, name, seq, coarse in screened[:3]:
         start = resample(coarse, cfg.n_points)
-        opt = minimise_in_airspace(start, threats, cfg.w, box, air, _aim(p.limits))
+        # SLSQP ends on the constraints it is given, so the exact check would pass or fail as
+        # the last bit falls (air_geofence_0 at w 0.5 missed the 10 m turn radius by 2.1 mm,
+        # air_ridges_mask_0 at w 0.8 by 2.0 mm on OpenBLAS's Haswell kernels only).
+        opt = minimise_in_airspace(start, threats, cfg.w, box, air, aim(p.limits))
         if air.violations(opt) or (box is not None and not _in_box(opt, box)):
             opt = start      # the resampled screened path respects every constraint
         cand = Candidate(seq=seq, initial=np.vstack([p.s, net.nodes[seq], p.t]),
@@ -331,18 +334,6 @@ def plan_in_airspace(p: Problem) -> Candidate:
             break
     p.clock.lap('optimisation_ms')
     return best
-
-
-def _aim(limits: FlightLimits) -> FlightLimits:
-    """Return the limits SLSQP aims at: inside the real ones by best's margins.
-
-    SLSQP ends on the constraints it is given, and the exact check then passes or fails
-    as the last bit falls: air_geofence_0 at w 0.5 and 0.8 missed the 10 m turn radius by
-    2.1 mm and 0.4 mm, and air_ridges_mask_0 at w 0.8 met it on OpenBLAS's SkylakeX
-    kernels and missed it by 2.0 mm on its Haswell ones.
-    """
-    return limits.tightened(ANGLE_MARGIN_DEG, RADIUS_MARGIN) if limits.any_constraint \
-        else limits
 
 
 def _in_box(points: NDArray, box, tol: float = 1e-9) -> bool:

@@ -29,7 +29,7 @@ from threat_planner.core.optimise.limits import FlightLimits, meets_limits
 from threat_planner.core.optimise.smoothing import resample
 from threat_planner.core.world.threats import Box, ThreatField
 
-__all__ = ['is_crowded', 'OptimisationResult', 'minimise_cost']
+__all__ = ['aim', 'is_crowded', 'OptimisationResult', 'minimise_cost']
 
 #: Weight of the even-spacing term relative to the length cost.
 SPACING_WEIGHT = 1e-3
@@ -364,7 +364,7 @@ class _Level:
         self.pick_pairs(x)
         even = even * self.spring_unit
         scale = float(objective_scale(self.value(x, even)))
-        term = LimitTerm(self.limits.tightened(ANGLE_MARGIN_DEG, RADIUS_MARGIN), self.n)
+        term = LimitTerm(aim(self.limits), self.n)
         lam = np.zeros(term.rows) if lam is None else term.transfer(lam)
         z = np.ascontiguousarray(x, float).reshape(-1).copy()
         best = z.copy()
@@ -407,6 +407,11 @@ def _prolong(x: NDArray, count: int) -> NDArray:
     out[1::2] = 0.5 * (x[:-1] + x[1:])
     out[2:-2:2] = (x[:-2] + 6.0 * x[1:-1] + x[2:]) / 8.0
     return out
+
+
+def aim(limits: FlightLimits) -> FlightLimits:
+    """Return the limits the optimisers aim at: ANGLE_MARGIN_DEG and RADIUS_MARGIN inside."""
+    return limits.tightened(ANGLE_MARGIN_DEG, RADIUS_MARGIN)
 
 
 def _violation(x: NDArray, limits: FlightLimits) -> float:
