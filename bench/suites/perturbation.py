@@ -15,9 +15,10 @@ The report gives each J(moved) / J(given); the target (issue 28) is every ratio 
 by that distance, so beyond ~size / diagonal relative a change of J is the planner taking
 another basin or stopping elsewhere, not the cost changing.
 
-Warm replans too: after the 1 mm move (first seed) each case is planned again with
-``warm_start`` = the plan as given; the report counts where the warm start applied and
-where its J stayed within 1e-6 of the cold plan of the moved field or below.
+Warm replans too, as a node replans in its loop: every moved field is planned again with
+``warm_start`` = the plan as given, against the same target; and for the first 1 mm field
+the report counts where the warm start applied and where its J stayed within 1e-6 of the
+cold plan of that field or below.
 
 ``--tree`` plans with another checkout's ``threat_planner`` (e.g. a ``git worktree`` of
 an older commit, for a before / after pair of reports written by this one suite): the
@@ -96,14 +97,21 @@ def run(limits: tuple[str, ...] = ('on',)) -> list[dict]:
             given, ms = timed(plan, threats, s, t, box, cfg)
             row = {'case': name, 'limits': label, 'J': given.cost.J, 'ms': ms,
                    'seed': given.seed, 'ratios': {}, 'seeds_moved': {}}
+            loop = []
             for size in MOVES:
-                others = [timed(plan, nudged(threats, SEEDS * k + i, size), s, t, box, cfg)
-                          for i in range(SEEDS)]
+                fields = [nudged(threats, SEEDS * k + i, size) for i in range(SEEDS)]
+                others = [timed(plan, field, s, t, box, cfg) for field in fields]
                 row['ratios'][f'{size:g}'] = [o.cost.J / given.cost.J for o, _ in others]
                 row['seeds_moved'][f'{size:g}'] = [o.seed for o, _ in others]
                 row.setdefault('ms_moved', []).extend(ms for _, ms in others)
-            field = nudged(threats, SEEDS * k, MOVES[-1])
-            warm, warm_ms = timed(plan, field, s, t, box, cfg, warm_start=given)
+                # The same fields replanned as the node does, from the plan before them.
+                loop += [timed(plan, field, s, t, box, cfg, warm_start=given)
+                         for field in fields]
+            row['loop_ratios'] = [o.cost.J / given.cost.J for o, _ in loop]
+            row['loop_warm'] = [bool(o.warm) for o, _ in loop]
+            row['loop_ms'] = [ms for _, ms in loop]
+            # The first 1 mm field's: its warm J against the cold plan of that field.
+            warm, warm_ms = loop[(len(MOVES) - 1) * SEEDS]
             cold_j = row['ratios'][f'{MOVES[-1]:g}'][0] * given.cost.J
             row.update(warm=warm.warm, warm_note=warm.warm_note, warm_ms=warm_ms,
                        warm_J=warm.cost.J, cold_J=cold_j)
@@ -166,6 +174,7 @@ def markdown(rows: list[dict], commit: str = '', arithmetic: str = 'host',
                      f'{sum(_warm_ok(row) for row in mine)} | '
                      f'{sum(_warm_ok(row) for row in bundled)} | '
                      f'{statistics.median(times) if times else float("nan"):.1f} |')
+    lines += loop_table(rows)
     every = [ms for row in rows for ms in [row['ms'], *row.get('ms_moved', [])]]
     if every:
         lines += ['', f'Median cold plan {statistics.median(every):.1f} ms over '
@@ -185,6 +194,28 @@ def markdown(rows: list[dict], commit: str = '', arithmetic: str = 'host',
     if against:
         lines += arithmetic_table(against, rows)
     return '\n'.join(lines) + '\n'
+
+
+def loop_table(rows: list[dict]) -> list[str]:
+    """Lines on every moved field replanned warm from the unmoved plan (a node's loop)."""
+    if not any('loop_ratios' in row for row in rows):
+        return []
+    lines = ['', '## Replans in a loop: every moved field, warm from the unmoved plan', '',
+             'As the node replans: each moved field above planned with ``warm_start`` = the '
+             'plan as given; ratio = J(replan) / J(given), the same target.', '',
+             '| limits | plans | warm | cases worse | plans up | least | largest | '
+             'median ms |', '|---|---:|---:|---:|---:|---:|---:|---:|']
+    for label in ('on', 'off'):
+        mine = [row for row in rows if row['limits'] == label and 'loop_ratios' in row]
+        if not mine:
+            continue
+        r = [x for row in mine for x in row['loop_ratios']]
+        worse = sum(any(x > 1 + WORSE for x in row['loop_ratios']) for row in mine)
+        lines.append(f'| {label} | {len(r)} | {sum(sum(row["loop_warm"]) for row in mine)} '
+                     f'| {worse} | {sum(x > 1 + WORSE for x in r)} | {min(r):.4f} | '
+                     f'{max(r):.4f} | '
+                     f'{statistics.median(ms for row in mine for ms in row["loop_ms"]):.1f} |')
+    return lines
 
 
 def arithmetic_table(host: list[dict], other: list[dict]) -> list[str]:

@@ -75,3 +75,16 @@ def test_the_other_arithmetic_reaches_numpy_and_numba_in_the_child():
     out = subprocess.run([sys.executable, '-c', probe], capture_output=True, text=True,
                          env={**os.environ, **rp.OTHER_ARITHMETIC}, check=True).stdout
     assert out.split() == ['False', 'False', 'generic']
+
+
+def test_the_loop_table_counts_warm_replans_above_the_target():
+    rows = [dict(_row('a@0.2', 'on', ([1.0] * 3, [1.0] * 3)), loop_ratios=[1.0, 1.002, 0.99],
+                 loop_warm=[True, True, False], loop_ms=[1.0, 3.0, 9.0]),
+            dict(_row('b', 'on', ([1.0] * 3, [1.0] * 3)), loop_ratios=[1.0005, 1.0, 1.0],
+                 loop_warm=[True] * 3, loop_ms=[2.0, 2.0, 2.0])]
+    lines = rp.loop_table(rows)
+    assert '| on | 6 | 5 | 1 | 1 | 0.9900 | 1.0020 | 2.0 |' in lines
+    assert not any(line.startswith('| off |') for line in lines)
+    # Rows of a run before the loop was measured (an --against file) give no table.
+    assert rp.loop_table([_row('a@0.2', 'on', ([1.0] * 3, [1.0] * 3))]) == []
+    assert 'Replans in a loop' in rp.markdown(rows)
