@@ -232,13 +232,21 @@ def arithmetic_table(host: list[dict], other: list[dict]) -> list[str]:
              f'{len(pairs)} cases: J bit for bit the same in {same}; more than {WORSE:g} '
              f'apart in {len(apart)}; other / host from {min(ratio):.4f} to '
              f'{max(ratio):.4f}. Moved plans: ratio bit for bit the same in '
-             f'{sum(x == y for x, y in moved)} of {len(moved)}.']
+             f'{sum(x == y for x, y in moved)} of {len(moved)}.' + _loop_same(pairs)]
     if apart:
         lines += ['', '| case | limits | J host | J other | other / host | seed host | '
                   'seed other |', '|---|---|---:|---:|---:|---|---|']
         lines += [f'| {a["case"]} | {a["limits"]} | {a["J"]:.3f} | {b["J"]:.3f} | {x:.4f} | '
                   f'{a["seed"]} | {b["seed"]} |' for a, b, x in apart]
     return lines
+
+
+def _loop_same(pairs: list[tuple[dict, dict]]) -> str:
+    """' Replans in a loop: ... of ...' where both sides measured them, else ''."""
+    loop = [(x, y) for a, b in pairs if 'loop_ratios' in a and 'loop_ratios' in b
+            for x, y in zip(a['loop_ratios'], b['loop_ratios'])]
+    return (f' Replans in a loop: ratio bit for bit the same in '
+            f'{sum(x == y for x, y in loop)} of {len(loop)}.' if loop else '')
 
 
 def bundled_plans() -> dict:
