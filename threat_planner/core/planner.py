@@ -204,8 +204,8 @@ def _no_higher_than_its_start(p: Problem, cand: Candidate, start: NDArray) -> Ca
     """Return a warm replan's candidate, or its start where that meets the limits lower.
 
     Under the optimiser's cut-off the rounds lower a J without the far threats, and a
-    replan could end above the path it started from (bench perturbation, n120 seed 0 w
-    0.8 with the limits off: up to +0.1 % over the previous plan after 1 nm moves).
+    replan could end above the path it started from (bench perturbation's moves of n120
+    seed 0 w 0.8 with the limits off: up to +0.1 % over the previous plan).
     """
     if len(start) != len(cand.final):
         return cand
