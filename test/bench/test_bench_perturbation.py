@@ -61,7 +61,7 @@ def test_the_arithmetic_table_lists_the_cases_whose_unmoved_plan_differs():
     assert lines[-1] == '| b | on | 10.000 | 10.050 | 1.0050 | route 0 | surface route 1 |'
     assert rp.arithmetic_table(host, [_row('c', 'on', ([1.0] * 3, [1.0] * 3))]) == []
     for row, loop in zip(host + other, ([1.0, 1.0], [1.0, 1.1], [1.0, 1.0], [1.0, 1.2])):
-        row['loop_ratios'] = loop
+        row.update(loop_ratios=loop, loop_warm=[True] * 2, loop_ms=[1.0] * 2)
     assert rp.arithmetic_table(host, other)[3].endswith(
         'Replans in a loop: ratio bit for bit the same in 3 of 4.')
     assert 'unmoved plans on both' in rp.markdown(other, arithmetic='other', against=host)
