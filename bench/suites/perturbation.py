@@ -201,7 +201,7 @@ def loop_table(rows: list[dict]) -> list[str]:
     if not any('loop_ratios' in row for row in rows):
         return []
     lines = ['', '## Replans in a loop: every moved field, warm from the unmoved plan', '',
-             'As the node replans: each moved field above planned with ``warm_start`` = the '
+             'As the node replans: each moved field above planned with `warm_start` = the '
              'plan as given; ratio = J(replan) / J(given), the same target.', '',
              '| limits | plans | warm | cases worse | plans up | least | largest | '
              'median ms |', '|---|---:|---:|---:|---:|---:|---:|---:|']
