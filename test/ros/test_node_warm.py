@@ -24,6 +24,16 @@ from threat_planner.ros.recording.replay import replay_bag
 SCENARIO = load_scenario(REPO / 'test' / 'data' / 'weak20_0.yaml')
 
 
+def _send(client, pub, namespace, positions, intensities, sec):
+    """Publish the threats stamped ``sec`` [s]; return the message and its plan_info."""
+    msg = cloud(positions, intensities)
+    msg.header.stamp.sec = sec
+    pub.publish(msg)
+    return msg, info(client.wait_for(
+        f'{namespace}/plan_info', lambda m: info(m)['input_stamp_ns'] == str(sec * 10**9),
+        timeout=120.0))
+
+
 def test_a_small_move_replans_warm_no_worse_than_cold_and_replays(tmp_path):
     domain = domain_id(152)
     params = {'start': SCENARIO.start.tolist(), 'goal': SCENARIO.goal.tolist(),
@@ -35,21 +45,15 @@ def test_a_small_move_replans_warm_no_worse_than_cold_and_replays(tmp_path):
         client.subscribe('/warm/plan_info', DiagnosticArray)
         pub = client.publisher('/warm/threats', PointCloud2)
         client.wait_matched(pub, timeout=30.0)
-        answers = []
-        sent = []
-        for k, shift in enumerate((0.0, 0.05)):
-            msg = cloud(SCENARIO.threats.positions + shift, SCENARIO.threats.intensities)
-            msg.header.stamp.sec = 10 + k
-            pub.publish(msg)
-            sent.append(msg)
-            answers.append(info(client.wait_for(
-                '/warm/plan_info', lambda m, s=10 + k: info(m)['input_stamp_ns'] ==
-                str(s * 10**9), timeout=120.0)))
+        sent = [_send(client, pub, '/warm', SCENARIO.threats.positions + shift,
+                      SCENARIO.threats.intensities, 10 + k)
+                for k, shift in enumerate((0.0, 0.05))]
+        answers = [answer for _, answer in sent]
     finally:
         client.close()
         assert stop_process(proc, signal.SIGTERM) == 0
     assert [a['start'] for a in answers] == ['cold', 'warm']
-    positions, intensities = threats_from_pointcloud2(sent[1], 'map')
+    positions, intensities = threats_from_pointcloud2(sent[1][0], 'map')
     cold = plan(ThreatField.from_arrays(positions, intensities), SCENARIO.start,
                 SCENARIO.goal, SCENARIO.box)
     assert not cold.warm
@@ -85,12 +89,8 @@ def test_the_published_route_holds_its_j_while_the_threats_jitter(tmp_path):
         for k in range(5):
             d = np.random.default_rng(k).normal(size=threats.positions.shape)
             d *= (1e-3 if k else 0.0) / np.linalg.norm(d, axis=1)[:, None]
-            msg = cloud(threats.positions + d, threats.intensities)
-            msg.header.stamp.sec = 10 + k
-            pub.publish(msg)
-            answers.append(info(client.wait_for(
-                '/jitter/plan_info', lambda m, sec=10 + k: info(m)['input_stamp_ns'] ==
-                str(sec * 10**9), timeout=120.0)))
+            answers.append(_send(client, pub, '/jitter', threats.positions + d,
+                                 threats.intensities, 10 + k)[1])
     finally:
         client.close()
         assert stop_process(proc, signal.SIGTERM) == 0
