@@ -23,6 +23,7 @@ from typing import Optional
 import numpy as np
 from numpy.typing import NDArray
 
+from threat_planner.core._vector import rows_dot
 from threat_planner.core.cost.closed_form import Cost
 from threat_planner.core.cost.kernels import path_cost
 from threat_planner.core.cost.masking import masked_cost
@@ -59,9 +60,8 @@ def _deviation(path: NDArray, a: int, b: int) -> tuple[int, float]:
     p, q = path[a], path[b]
     d = q - p
     inner = path[a + 1:b]
-    # einsum, not @: BLAS sums in a CPU's own order, and the kept points would follow it.
-    t = np.clip(np.einsum('ik,k->i', inner - p, d) / max(float(np.einsum('k,k->', d, d)), 1e-300),
-                0.0, 1.0)
+    # Not @: BLAS sums in a CPU's own order, and the kept points would follow it.
+    t = np.clip(rows_dot(inner - p, d) / max(float(rows_dot(d, d)), 1e-300), 0.0, 1.0)
     dist = np.linalg.norm(inner - p - t[:, None] * d, axis=1)
     k = int(np.argmax(dist))
     return a + 1 + k, float(dist[k])

@@ -251,7 +251,8 @@ def _blocks(points: NDArray, limits: FlightLimits
     # dh/dd; a vertical segment has no horizontal direction, so take the start-goal one
     # (any horizontal unit vector is a subgradient; a zero one would be a false optimum).
     axis = p[-1, :2] - p[0, :2]
-    axis = axis / vector_length(axis) if vector_length(axis) > 0 else np.array([1.0, 0.0])
+    span = vector_length(axis)
+    axis = axis / span if span > 0 else np.array([1.0, 0.0])
     dh = np.zeros_like(d)
     flat = h > 0
     dh[flat, :2] = d[flat, :2] / h[flat, None]
