@@ -213,7 +213,7 @@ def test_a_shortcut_refine_that_ends_infeasible_is_redone_the_long_way(monkeypat
 
     monkeypatch.setattr(best, 'refine', fake)
     start = _path(0.0)
-    assert best._usable(best._refine(None, start, [], 'x', True)) and calls == [True, False]
+    assert best.usable(best._refine(None, start, [], 'x', True)) and calls == [True, False]
     calls.clear()
     best._refine(None, start, [], 'x', False)
     assert calls == [False]
@@ -228,19 +228,19 @@ def _rules_problem(name, **limits):
 
 
 def test_crowded_fields_without_limits_count_every_threat_and_others_keep_cut_offs():
-    from threat_planner.core.methods.best import _counts_far_threats, _optimiser_cutoff
+    from threat_planner.core.methods.refining import counts_far_threats, optimiser_cutoff
     off = {'max_climb_deg': 90.0, 'max_dive_deg': 90.0, 'min_turn_radius_m': 0.0}
     crowded_off = _rules_problem('big300_0', **off)
-    assert _counts_far_threats(crowded_off)
-    assert _optimiser_cutoff(40, crowded_off) is None          # 12,000 pairs, all counted
-    assert _optimiser_cutoff(80, crowded_off) is not None      # 24,000: too many
+    assert counts_far_threats(crowded_off)
+    assert optimiser_cutoff(40, crowded_off) is None          # 12,000 pairs, all counted
+    assert optimiser_cutoff(80, crowded_off) is not None      # 24,000: too many
     crowded_on = _rules_problem('big300_0')
-    assert not _counts_far_threats(crowded_on)
-    assert _optimiser_cutoff(40, crowded_on) == pytest.approx(
+    assert not counts_far_threats(crowded_on)
+    assert optimiser_cutoff(40, crowded_on) == pytest.approx(
         3.0 * crowded_on.threats.typical_spacing(crowded_on.box))
     sparse_off = _rules_problem('uniform20_0', **off)
     assert not is_crowded(sparse_off.threats, sparse_off.box)
-    assert not _counts_far_threats(sparse_off)
+    assert not counts_far_threats(sparse_off)
 
 
 def test_surface_routes_cost_the_lattice_exactly_up_to_the_pairs_allowed(monkeypatch):
@@ -316,7 +316,7 @@ def test_each_rescue_run_starts_at_a_higher_penalty_until_it_meets_the_limits(mo
             # The first refined basin stalls (also when refined again from the start).
             return dataclasses.replace(cand, limit_check=stalled) if name in first else cand
         if not kw.get('respace'):
-            return cand      # not a rescue run: best._polish or best.converge
+            return cand      # not a rescue run: best._polish
         seen.append(kw['penalty'])
         met.append(cand.limit_check.feasible)
         return cand if len(seen) >= 3 else dataclasses.replace(cand, limit_check=stalled)

@@ -159,7 +159,7 @@ def test_a_warm_start_that_breaks_a_limit_refines_at_full_resolution_no_worse_th
     """The speed bench's uniform20_0 at w 0.5: the previous path from the new start,
     resampled, breaks a limit; the warm replan still ends at the cold plan's J or below,
     within the spread of the neighbouring minima both end in (converged from each end:
-    140.849 and 140.840, 6e-5 apart; the plans before best.converge, 141.18 and 141.23)."""
+    140.849 and 140.840, 6e-5 apart; the plans before refining.converge, 141.18 and 141.23)."""
     from threat_planner.core.methods.warm import warm_path
     sc = load_scenario(DATA + 'uniform20_0.yaml')
     cfg = PlannerConfig(w=0.5)

@@ -18,8 +18,8 @@ from numpy.typing import ArrayLike, NDArray
 from threat_planner.core.cost.closed_form import Cost
 from threat_planner.core.inputs.config import PlannerConfig
 from threat_planner.core.inputs.settings import METHODS
-from threat_planner.core.methods.best import converge, refine
 from threat_planner.core.methods.problem import Candidate, Clock, Problem
+from threat_planner.core.methods.refining import converge, refine
 from threat_planner.core.methods.registry import K_SWEEP, METHOD_FUNCTIONS
 from threat_planner.core.methods.warm import warm_path
 from threat_planner.core.network.partition import build_network, paper_network
@@ -189,7 +189,7 @@ def _plan_warm(previous: PlanResult, threats: ThreatField, s: NDArray, t: NDArra
     cand = refine(problem, path, previous.node_sequence, previous.seed, tolerance=1e-8,
                   warm=True)
     if cand.limits_bound:
-        # Ended as a cold plan ends (best.converge): from a start that broke a limit,
+        # Ended as a cold plan ends (refining.converge): from a start that broke a limit,
         # the rounds at FINAL_EVEN alone ended 6e-5 above the cold plan (test_plan_limits).
         cand = converge(problem, cand)
     cand = _no_higher_than_its_start(problem, cand, path)

@@ -20,8 +20,8 @@ from numpy.typing import ArrayLike
 from threat_planner.core.cost.closed_form import Cost, segment_integrals
 from threat_planner.core.cost.masking import masked_cost
 from threat_planner.core.inputs.config import PlannerConfig
-from threat_planner.core.methods.best import refine
 from threat_planner.core.methods.problem import Candidate, Clock, Problem
+from threat_planner.core.methods.refining import refine
 from threat_planner.core.planner import _result as plan_result, plan
 from threat_planner.core.result import PlanResult
 from threat_planner.core.world.airspace import Airspace

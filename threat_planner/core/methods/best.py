@@ -19,28 +19,22 @@ from threat_planner.core.methods.basins import (basin_lead, COARSE_SEGMENTS, kno
                                                 refined_margin, runner_up_gate, same_basin,
                                                 slope_screening)
 from threat_planner.core.methods.problem import Candidate, Problem, smooth_route
+from threat_planner.core.methods.refining import (converge, counts_far_threats, lower,
+                                                  optimiser_cutoff, refine, usable,
+                                                  WARM_PENALTY)
 from threat_planner.core.network.search import alternative_routes, nearest_nodes, segment_costs
 from threat_planner.core.network.seeds import surface_routes
-from threat_planner.core.optimise.optimisation import (EVEN_SPACING_WEIGHT, is_crowded,
-                                                       minimise_cost, PENALTY_START)
+from threat_planner.core.optimise.optimisation import is_crowded, minimise_cost, PENALTY_START
 from threat_planner.core.optimise.smoothing import check_angles, resample
 
-__all__ = ['converge', 'plan_best', 'refine', 'repair']
+__all__ = ['plan_best', 'repair']
 
 #: Stopping tolerance of the coarse screening minimisation (its segments, at which basins
 #: are told apart too: basins.COARSE_SEGMENTS).
 COARSE_TOLERANCE = 1e-4
-#: Largest (segment, threat) pairs per optimiser evaluation counted in full.
-OPTIMISER_DENSE_PAIRS = 4_000
-#: The same, and the surface lattice's exact-cost limit, in a crowded field without
-#: flight limits (:func:`_counts_far_threats`). On 18 random 300-threat fields (1 km box,
-#: F 1e9-4e9, w 0.2/0.5/0.8) J over the bench's in-box yardstick went from median 1.0026
-#: / worst 1.0130 (cut-offs) to 1.0005 / 1.0111 counting all in the optimiser, and to
-#: 1.0005 / 1.0068 with the lattice's 464,000 pairs exact too; 59 -> 77 ms a plan.
-OPTIMISER_CROWDED_DENSE_PAIRS = 20_000
+#: The surface lattice's exact-cost limit in a crowded field without flight limits
+#: (measured beside refining.OPTIMISER_CROWDED_DENSE_PAIRS, see there).
 SURFACE_DENSE_PAIRS = 500_000
-#: Optimiser cut-off beyond that, in typical threat spacings.
-OPTIMISER_CUTOFF_SPACINGS = 3.0
 #: Screened basins refined, best first, until one meets the flight limits.
 FEASIBILITY_TRIES = 3
 #: Basins refined when the limits bind (the best feasible one kept).
@@ -64,18 +58,6 @@ RESCUE_GROWTH = 10.0
 RESCUE_MARGIN = 0.1
 #: Bisection steps of the last-resort repair towards the straight line.
 REPAIR_BISECTIONS = 20
-#: First penalty of a warm replan's rounds (and the winner's last ones), from the previous
-#: path as it is: it meets the limits, and a low penalty let the first round leave it and
-#: come back elsewhere. The 21 bundled cases after every threat moved 1 mm, warm J at most
-#: 1e-6 above a cold plan's: 16 at 10, 18 at 100, 14 at 1000.
-WARM_PENALTY = 100.0
-#: Even-spacing weight of the last rounds (:func:`converge`), against EVEN_SPACING_WEIGHT
-#: before. The spacing term keeps vertices from bunching while the path finds its shape,
-#: but it also holds them off J's own optimum, and rounds that stop on a small gain then
-#: end anywhere along that slope: uniform20_0 at w 0.8 ended at J 144.98-145.30 with its
-#: threats moved 1 nm-1 mm, where SLSQP from those ends found two minima, 144.956 and
-#: 144.763; rounds at 0.01 from each end met them to 1e-4 (10 ms), at 1.0 they moved 0.
-FINAL_EVEN = 0.01
 
 
 def plan_best(p: Problem) -> Candidate:
@@ -101,33 +83,6 @@ def plan_best(p: Problem) -> Candidate:
     return _optimise_routes(p, routes)
 
 
-def _optimiser_cutoff(segments: int, p: Problem) -> float | None:
-    """Cut-off radius for a minimisation over ``segments`` segments, None to count all.
-
-    Every threat is counted while that costs at most OPTIMISER_DENSE_PAIRS pairs per
-    evaluation (OPTIMISER_CROWDED_DENSE_PAIRS where :func:`_counts_far_threats`). Beyond,
-    far threats are dropped: a much wider radius than the edge costs' because the
-    optimiser follows the gradient, which a cut-off distorts, into places the Dijkstra
-    route never went.
-    """
-    limit = OPTIMISER_CROWDED_DENSE_PAIRS if _counts_far_threats(p) else OPTIMISER_DENSE_PAIRS
-    if segments * len(p.threats) <= limit:
-        return None
-    return OPTIMISER_CUTOFF_SPACINGS * p.threats.typical_spacing(p.box)
-
-
-def _counts_far_threats(p: Problem) -> bool:
-    """Whether a crowded field is planned without flight limits: far threats count more.
-
-    Where the reaches exceed the spacing the far threats are a large share of J_R, and
-    cut-offs mislead the refinement and the surface routes. Under the limits, counting
-    them was measured too (18 random 300-threat fields, the default limits: climb and
-    dive 30 deg, turn radius 10 m): 1.7x the time (447 -> 774 ms) with J from -40 % to
-    +2 % either way, so they keep the cut-offs.
-    """
-    return not p.limits.any_constraint and is_crowded(p.threats, p.box)
-
-
 def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     """Screen every route and the straight line coarsely, then refine the lowest-J one.
 
@@ -143,7 +98,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     seeds = [(f'route {i}', seq, np.vstack([p.s, nodes[seq], p.t]))
              for i, seq in enumerate(routes)] + [('straight line', [], np.vstack([p.s, p.t]))]
     screened = []
-    cutoff = _optimiser_cutoff(COARSE_SEGMENTS, p)
+    cutoff = optimiser_cutoff(COARSE_SEGMENTS, p)
     for name, seq, initial in seeds:
         coarse = minimise_cost(resample(initial, COARSE_SEGMENTS), threats, w, bounds,
                                cutoff=cutoff, tolerance=COARSE_TOLERANCE).points
@@ -153,7 +108,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     # edges, where dense fields put the in-box optimum, join the screened seeds as they
     # are: 8 coarse segments would cut the box's corners back into the threats.
     if cfg.surface_seeds and bounds is not None:
-        dense = SURFACE_DENSE_PAIRS if _counts_far_threats(p) else None
+        dense = SURFACE_DENSE_PAIRS if counts_far_threats(p) else None
         screened += [(p.cost(line).J, f'surface route {i}', [], line) for i, line in
                      enumerate(surface_routes(threats, p.s, p.t, p.box, w, dense_pairs=dense))]
     # --- end of the global-search hook
@@ -184,7 +139,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     bound, refined, runner_lead = False, [], None
     for name, seq, coarse, broken in order[:tries]:
         start = resample(coarse, cfg.n_points)
-        if best is not None and bound and _usable(best) and best.levels:
+        if best is not None and bound and usable(best) and best.levels:
             # The runner-up basin level by level, the finer levels only while it may win
             # (measured: most runners-up were in the winner's basin from the coarsest).
             verdict: list[float] = []
@@ -197,15 +152,15 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
             cand = _refine(p, start, seq or routes[0], name, broken)
         bound = bound or cand.limits_bound
         refined.append(cand)
-        if best is None or ((_usable(cand), -cand.cost.J) > (_usable(best), -best.cost.J)):
+        if best is None or ((usable(cand), -cand.cost.J) > (usable(best), -best.cost.J)):
             best = cand
         # Where the limits bind, the runner-up basin is refined too (measured: the
         # constrained optimum of the second basin wins on a third of the bundled cases).
-        feasible = sum(_usable(c) for c in refined)
-        if _usable(best) and (feasible >= basins or not bound):
+        feasible = sum(usable(c) for c in refined)
+        if usable(best) and (feasible >= basins or not bound):
             break
     best = _rescue(p, best, refined)
-    if bound and _usable(best):
+    if bound and usable(best):
         # A polished winner is converged once more here: not work done twice, that run
         # lowered two of n20 seed 1 w 0.8's moved plans by a further 2e-5 and 4e-5.
         best = converge(p, _polish(p, best))
@@ -235,7 +190,7 @@ def _refine(p: Problem, start: NDArray, seq: list[int], name: str, broken: bool,
     without it, met the limits (the blend towards the line was 45 % above).
     """
     cand = refine(p, start, seq, name, box_broken=broken, gate=gate)
-    if broken and not _usable(cand) and len(cand.final) == len(start):
+    if broken and not usable(cand) and len(cand.final) == len(start):
         cand = refine(p, start, seq, name, gate=gate)
     return cand
 
@@ -252,18 +207,18 @@ def _rescue(p: Problem, best: Candidate, refined: list[Candidate]) -> Candidate:
     (1 + RESCUE_MARGIN) x best's J, least J first, until one beats best: up to
     RESCUE_TRIES runs each.
     """
-    stalled = sorted((c for c in refined if not _usable(c) and np.isfinite(c.cost.J)
+    stalled = sorted((c for c in refined if not usable(c) and np.isfinite(c.cost.J)
                       and len(c.final) == p.config.n_points + 1), key=lambda c: c.cost.J)
     for cand in stalled:
-        if _usable(best) and cand.cost.J >= (1.0 + RESCUE_MARGIN) * best.cost.J:
+        if usable(best) and cand.cost.J >= (1.0 + RESCUE_MARGIN) * best.cost.J:
             break
         again = cand
         for k in range(RESCUE_TRIES):
             again = refine(p, again.final, cand.seq, f'{cand.seed}, rounds again', warm=True,
                            penalty=PENALTY_START * RESCUE_GROWTH ** k, respace=True)
-            if _usable(again):
+            if usable(again):
                 break
-        if _usable(again) and (not _usable(best) or again.cost.J < best.cost.J):
+        if usable(again) and (not usable(best) or again.cost.J < best.cost.J):
             again.limits_bound, again.levels = True, cand.levels
             return again
     return best
@@ -294,33 +249,7 @@ def _polish(p: Problem, best: Candidate) -> Candidate:
                            penalty=mu) for mu in (WARM_PENALTY, PENALTY_START)),
                   refine(p, resample(best.levels[0], n), best.seq, best.seed,
                          box_broken=True, subdivide=True)):
-        best = _lower(best, converge(p, again) if _usable(again) else again)
-    return best
-
-
-def converge(p: Problem, best: Candidate) -> Candidate:
-    """Return best, or its rounds again at FINAL_EVEN from its own path where lower in J.
-
-    Where the limits bound, the rounds end where a round gained little, short of the
-    constrained minimum and wherever rounding leaves them; from there, with the spacing
-    held less, they reach the minimum of the basin the path is in (FINAL_EVEN), so a
-    plan moves with the input wherever that minimum does. Only where the optimiser counts
-    every threat (:func:`_optimiser_cutoff`): under a cut-off the rounds lower a J without
-    the far threats, and on random 300- and 1,000-threat fields they ran 220-550 L-BFGS
-    iterations (45-105 ms, the plan's other rounds 20-35 ms) for no lower J.
-    """
-    n = p.config.n_points
-    if len(best.final) != n + 1 or _optimiser_cutoff(n, p) is not None:
-        return best
-    return _lower(best, refine(p, best.final, best.seq, best.seed, tolerance=1e-8,
-                               warm=True, penalty=WARM_PENALTY, even=FINAL_EVEN))
-
-
-def _lower(best: Candidate, again: Candidate) -> Candidate:
-    """Return `again` (bound, with best's levels if it has none) if usable and lower in J."""
-    if _usable(again) and again.cost.J < best.cost.J:
-        again.limits_bound, again.levels = True, again.levels or best.levels
-        return again
+        best = lower(best, converge(p, again) if usable(again) else again)
     return best
 
 
@@ -344,17 +273,12 @@ def _surface_alternative(p: Problem, best: Candidate, order: list, route: list[i
             if same_basin(p, coarse, best.final):
                 return best, margin
             cand = _refine(p, resample(coarse, p.config.n_points), seq or route, name, broken)
-            if not _usable(cand):
+            if not usable(cand):
                 return best, margin
             low, high = sorted((cand, best), key=lambda c: c.cost.J)
             lead = high.cost.J / low.cost.J - 1.0 if low.cost.J > 0 else 0.0
             return low, (min(margin, lead) if low is best else lead)
     return best, margin
-
-
-def _usable(c: Candidate) -> bool:
-    """Whether a candidate meets the limits with a finite J (not through a threat)."""
-    return bool(c.limit_check.feasible and np.isfinite(c.cost.J))
 
 
 def _interleave(first: list, second: list) -> list:
@@ -396,52 +320,3 @@ def repair(p: Problem, cand: Candidate) -> Candidate:
                      angles=check_angles(pts, cfg.max_pitch_deg, cfg.max_turn_deg),
                      seed=f'{cand.seed}, repaired ({lo:.3g} of the way from the line)',
                      limit_check=p.check(pts), basin_margin=cand.basin_margin)
-
-
-def refine(p: Problem, start: NDArray, seq: list[int], name: str,
-           tolerance: float = 1e-6, warm: bool = False, box_broken: bool = False,
-           gate: Callable[[NDArray], bool] | None = None,
-           penalty: float | None = None, respace: bool = False,
-           even: float = EVEN_SPACING_WEIGHT, subdivide: bool = False) -> Candidate:
-    """Minimise J from a path of n_points segments inside the box and the flight limits.
-
-    Parameters
-    ----------
-    p : Problem
-        The problem.
-    start : ndarray
-        Starting path, (n+1, 3) [m], from S to T.
-    seq : list of int
-        Network route reported as the initial path (the line won: the best route).
-    name : str
-        Seed name reported in PlanResult.seed.
-    tolerance : float
-        Relative J decrease per iteration below which L-BFGS stops.
-    warm : bool
-        The start is a previous plan: straight to the constrained rounds if it is feasible.
-    box_broken, gate, penalty, respace, even, subdivide
-        As :func:`.optimisation.minimise_cost`: the basin's box-only optimum breaks the
-        limits; stop at a coarser level (the candidate's path then at its resolution);
-        the rounds' first penalty (None: PENALTY_START, WARM_PENALTY for a warm start);
-        a warm start evenly resampled first (the rescue's runs) or taken as it is; the
-        rounds' even-spacing weight; every level from the coarser one subdivided.
-
-    Returns
-    -------
-    Candidate
-
-    """
-    cfg = p.config
-    if penalty is None:
-        penalty = WARM_PENALTY if warm else PENALTY_START
-    opt = minimise_cost(start, p.threats, cfg.w, p.box if cfg.confine_to_box else None,
-                        p.limits, tolerance=tolerance, constrained_only=warm,
-                        cutoff=_optimiser_cutoff(cfg.n_points, p),
-                        box_broken=box_broken, gate=gate, penalty=penalty, respace=respace,
-                        even=even, subdivide=subdivide)
-    return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
-                     smoothed=None, smoothed_cost=None, final=opt.points, k=float('nan'),
-                     steps=0, converged=True, cost=p.cost(opt.points),
-                     angles=check_angles(opt.points, cfg.max_pitch_deg, cfg.max_turn_deg),
-                     seed=name, limit_check=p.check(opt.points),
-                     limits_bound=opt.constrained, levels=opt.levels)
