@@ -355,3 +355,23 @@ def test_without_limits_the_best_surface_route_is_refined_when_a_network_route_w
     assert both.cost.J < 0.97 * plain.cost.J
     # The warm-start lead is over the other refined basin, not the screening's ranking.
     assert both.basin_margin == pytest.approx(plain.cost.J / both.cost.J - 1.0)
+
+
+def test_screening_ties_in_a_refined_basin_are_left_out(monkeypatch):
+    """uniform20_0 at w 0.2: all three slope-held seeds are within best.SCREEN_TIE of the
+    best; the first is refined (and wins), the other two lie in its basin at 8 segments
+    and are not refined (each cost a gated runner-up's coarse levels for nothing)."""
+    from threat_planner.core.methods import best
+    from threat_planner.core.methods.basins import same_basin
+    from threat_planner.core.planner import plan, PlannerConfig
+    ties, names = [], []
+    real_ties, real_seed = best._ties, best._refine_seed
+    monkeypatch.setattr(best, '_ties', lambda p, held: ties.extend(real_ties(p, held))
+                        or list(ties))
+    monkeypatch.setattr(best, '_refine_seed', lambda p, entry, *rest: names.append(entry[0])
+                        or real_seed(p, entry, *rest))
+    sc = load_scenario(DATA / 'uniform20_0.yaml')
+    result = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=0.2))
+    left_out = [(name, path) for name, _, path, _ in ties if name not in names]
+    assert result.feasible and len(ties) == 3 and len(left_out) == 2
+    assert all(same_basin(PROBLEM, path, result.path) for _, path in left_out)
