@@ -42,7 +42,7 @@ FEASIBILITY_TRIES = 3
 BOUND_BASINS = 2
 #: Slope-held seeds whose screening J is within this fraction of the best one's are ties
 #: at 8 segments, each refined as a runner-up too (:func:`_refine_seed`'s gate) after
-#: those basins, unless in the basin of one refined already. On bench perturbation's 66
+#: those basins, unless in the basin of one refined already (outside crowded fields). On bench perturbation's 66
 #: cases the winners found so sat 2.0 % and 3.8 % above the best held J and refined
 #: 5.2 % and 3.0 % lower (n35 seed 2 w 0.5, n35 seed 1 w 0.8); the 21 bundled cases with
 #: the limits on, unchanged, took 2 % more time in all. Every seed in reach (10 of the
@@ -128,6 +128,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     margin = basin_lead(p, [(j, path) for j, _, _, path in screened])
     order = [(name, seq, coarse, False) for _, name, seq, coarse in screened]
     held_margin = float('nan')     # not known (no slope limit to hold)
+    ties: list = []
     # In a crowded field 8 segments through threats whose reach exceeds their spacing
     # rank the basins as unreliably as the coarse levels would (optimisation.py): one
     # more basin is refined there. Measured on big300_0 at w 0.2 / 0.5 / 0.8 with the turn
@@ -143,9 +144,10 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
         # Elsewhere the slope-held ranking first: its winner is the basin as flown (first
         # the box-only winner: uniform20_1 refined two basins that never met the limits).
         order = _interleave(order, held) if crowded else _interleave(held, order)
-        ties = _ties(p, held)
-    else:
-        ties = []
+        # Not in a crowded field, where one more basin is refined already and 8 segments
+        # misrank both ways (bench crowded_fields, 300 threats: 1 of 18 plans 0.07 %
+        # lower with ties, median plan 152 -> 174 ms).
+        ties = [] if crowded else _ties(p, held)
     p.clock.lap('screening_ms')
     best: Candidate | None = None
     bound, refined, runner_lead, looked = False, [], None, set()
