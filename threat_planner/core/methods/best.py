@@ -42,11 +42,12 @@ FEASIBILITY_TRIES = 3
 BOUND_BASINS = 2
 #: Slope-held seeds whose screening J is within this fraction of the best one's are ties
 #: at 8 segments, each refined as a runner-up too (:func:`_refine_seed`'s gate) after
-#: those basins, unless in the basin of one refined already (outside crowded fields). On bench perturbation's 66
-#: cases the winners found so sat 2.0 % and 3.8 % above the best held J and refined
-#: 5.2 % and 3.0 % lower (n35 seed 2 w 0.5, n35 seed 1 w 0.8); the 21 bundled cases with
-#: the limits on, unchanged, took 2 % more time in all. Every seed in reach (10 of the
-#: ranking) also found uniform20_0 at w 0.8 0.18 % lower (held 11 % above) for +86 %.
+#: those basins, unless in the basin of one refined already (outside crowded fields). On
+#: bench perturbation's 66 cases the winners found so sat 2.0 % and 3.8 % above the best
+#: held J and refined 5.2 % and 3.0 % lower (n35 seed 2 w 0.5, n35 seed 1 w 0.8); the 21
+#: bundled cases with the limits on, unchanged, took 2 % more time in all. Every seed in
+#: reach (10 of the ranking) also found uniform20_0 at w 0.8 0.18 % lower (held 11 %
+#: above) for +86 %.
 SCREEN_TIE = 0.05
 #: Excess of the finest level's J over the coarser level's beyond which the winner is also
 #: refined again from the coarser answer (python -m bench perturbation, n20 seed 1 w 0.8).
