@@ -207,9 +207,10 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
 
 def _ties(p: Problem, held: list) -> list:
     """Return the slope-held seeds within SCREEN_TIE of the first-ranked one's J."""
-    if not held:
-        return []
     js = [p.cost(points).J for _, _, points, _ in held]
+    if not js or not np.isfinite(js[0]):
+        # (a first-ranked seed through a threat: every other would tie with it)
+        return []
     return [item for item, j in zip(held, js) if j <= (1.0 + SCREEN_TIE) * js[0]]
 
 
