@@ -358,16 +358,16 @@ def test_without_limits_the_best_surface_route_is_refined_when_a_network_route_w
 
 
 def test_screening_ties_in_a_refined_basin_are_left_out(monkeypatch):
-    """uniform20_0 at w 0.2: all three slope-held seeds are within best.SCREEN_TIE of the
+    """uniform20_0 at w 0.2: all three slope-held seeds are within basins.SCREEN_TIE of the
     best; the first is refined (and wins), the other two lie in its basin at 8 segments
     and are not refined (each cost a gated runner-up's coarse levels for nothing)."""
     from threat_planner.core.methods import best
     from threat_planner.core.methods.basins import same_basin
     from threat_planner.core.planner import plan, PlannerConfig
     ties, names = [], []
-    real_ties, real_seed = best._ties, best._refine_seed
-    monkeypatch.setattr(best, '_ties', lambda p, held: ties.extend(real_ties(p, held))
-                        or list(ties))
+    real_screening, real_seed = best.slope_screening, best._refine_seed
+    monkeypatch.setattr(best, 'slope_screening', lambda *args: (
+        lambda out: ties.extend(out[2]) or out)(real_screening(*args)))
     monkeypatch.setattr(best, '_refine_seed', lambda p, entry, *rest: names.append(entry[0])
                         or real_seed(p, entry, *rest))
     sc = load_scenario(DATA / 'uniform20_0.yaml')

@@ -219,14 +219,14 @@ def test_every_basin_is_settled_before_a_rescue_is_weighed_against_it():
 @pytest.mark.parametrize('name, before, after', [
     ('n35 seed 2 w 0.5', 225.57, 213.8), ('n35 seed 1 w 0.8', 404.43, 392.5)])
 def test_seeds_tied_at_the_screening_are_refined_too(name, before, after, monkeypatch):
-    """Slope-held seeds within best.SCREEN_TIE (5 %) of the best one's screening J are
+    """Slope-held seeds within basins.SCREEN_TIE (5 %) of the best one's screening J are
     ties at 8 segments, and each is refined as a runner-up. These two fields' winners
     screened 2.0 % and 3.8 % above the best and refine to 213.73 and 392.41; the first two
     basins refined gave 225.57 and 404.43 (on 3992abd, and here without ties)."""
-    from threat_planner.core.methods import best
+    from threat_planner.core.methods import basins
     _, _, (_, threats, s, t, box, w) = _perturbation_case(name)
     tied = _unmoved_plan(name)
-    monkeypatch.setattr(best, 'SCREEN_TIE', 0.0)
+    monkeypatch.setattr(basins, 'SCREEN_TIE', 0.0)
     untied = plan(threats, s, t, box, PlannerConfig(w=w))
     assert tied.feasible and untied.feasible
     assert tied.cost.J < after < before < untied.cost.J + 0.01, (tied.cost.J, untied.cost.J)

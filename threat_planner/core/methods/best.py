@@ -40,15 +40,6 @@ SURFACE_DENSE_PAIRS = 500_000
 FEASIBILITY_TRIES = 3
 #: Basins refined when the limits bind (the best feasible one kept).
 BOUND_BASINS = 2
-#: Slope-held seeds whose screening J is within this fraction of the best one's are ties
-#: at 8 segments, each refined as a runner-up too (:func:`_refine_seed`'s gate) after
-#: those basins, unless in the basin of one refined already (outside crowded fields). On
-#: bench perturbation's 66 cases the winners found so sat 2.0 % and 3.8 % above the best
-#: held J and refined 5.2 % and 3.0 % lower (n35 seed 2 w 0.5, n35 seed 1 w 0.8); the 21
-#: bundled cases with the limits on, unchanged, took 2 % more time in all. Every seed in
-#: reach (10 of the ranking) also found uniform20_0 at w 0.8 0.18 % lower (held 11 %
-#: above) for +86 %.
-SCREEN_TIE = 0.05
 #: Excess of the finest level's J over the coarser level's beyond which the winner is also
 #: refined again from the coarser answer (python -m bench perturbation, n20 seed 1 w 0.8).
 UNSETTLED = 0.05
@@ -140,15 +131,16 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     crowded = is_crowded(threats, p.box)
     basins, tries = BOUND_BASINS + crowded, FEASIBILITY_TRIES + crowded
     if p.limits.climb_on or p.limits.dive_on:
-        held, held_margin = slope_screening(p, screened, bounds, cutoff, optimal,
-                                            COARSE_TOLERANCE)
+        held, held_margin, tied_seeds = slope_screening(p, screened, bounds, cutoff,
+                                                        optimal, COARSE_TOLERANCE)
         # Elsewhere the slope-held ranking first: its winner is the basin as flown (first
         # the box-only winner: uniform20_1 refined two basins that never met the limits).
         order = _interleave(order, held) if crowded else _interleave(held, order)
-        # Not in a crowded field, where one more basin is refined already and 8 segments
-        # misrank both ways (bench crowded_fields, 300 threats: 1 of 18 plans 0.07 %
-        # lower with ties, median plan 152 -> 174 ms).
-        ties = [] if crowded else _ties(p, held)
+        # Its ties (basins.SCREEN_TIE) are refined too, not in a crowded field, where one
+        # more basin is refined already and 8 segments misrank both ways (bench
+        # crowded_fields, 300 threats: 1 of 18 plans 0.07 % lower with ties, median plan
+        # 152 -> 174 ms).
+        ties = [] if crowded else tied_seeds
     p.clock.lap('screening_ms')
     best: Candidate | None = None
     bound, refined, runner_lead, looked = False, [], None, set()
@@ -203,15 +195,6 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
         best = repair(p, best)
     p.clock.lap('optimisation_ms')
     return best
-
-
-def _ties(p: Problem, held: list) -> list:
-    """Return the slope-held seeds within SCREEN_TIE of the first-ranked one's J."""
-    js = [p.cost(points).J for _, _, points, _ in held]
-    if not js or not np.isfinite(js[0]):
-        # (a first-ranked seed through a threat: every other would tie with it)
-        return []
-    return [item for item, j in zip(held, js) if j <= (1.0 + SCREEN_TIE) * js[0]]
 
 
 def _refine_seed(p: Problem, entry: tuple, route: list[int], best: Candidate | None,
