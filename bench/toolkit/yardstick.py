@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -209,7 +210,8 @@ def limited_yardstick(threats: ThreatField, start: NDArray, goal: NDArray, box: 
                       w: float, max_climb_deg: float, max_dive_deg: float,
                       min_turn_radius_m: float, n_segments: int = 60, spacing: float = 1.5,
                       in_box: dict | None = None, grid: int = 41,
-                      maxiter: int = 500, max_starts: int | None = None) -> dict:
+                      maxiter: int = 500, max_starts: int | None = None,
+                      extra_starts: Sequence[tuple[str, NDArray]] = ()) -> dict:
     """Least J found inside the box that also respects the flight limits.
 
     Parameters
@@ -235,6 +237,9 @@ def limited_yardstick(threats: ThreatField, start: NDArray, goal: NDArray, box: 
     max_starts : int, optional
         Use only the best this many in-box seeds (by refined J) besides the straight line;
         all of them if None.
+    extra_starts : sequence of (str, ndarray), optional
+        More starts, ``(how, path)``, tried after those (a planner's limit-free plan of the
+        same case is a cheap good one); none by default.
 
     Returns
     -------
@@ -256,6 +261,7 @@ def limited_yardstick(threats: ThreatField, start: NDArray, goal: NDArray, box: 
     ranked = sorted(best_per_seed.items(), key=lambda kv: kv[1]['J'])
     starts = [(how, c['path']) for how, c in ranked[:max_starts]]
     starts.append(('straight line', np.array([start, goal])))
+    starts += [(how, np.asarray(path, float)) for how, path in extra_starts]
     bounds = list(zip(np.tile(box.lo, n_segments - 1), np.tile(box.hi, n_segments - 1)))
     best, report = None, []
     for how, path in starts:
