@@ -213,8 +213,8 @@ def keep_regressions(rows: list[dict], seed: int, head: str, base: str) -> list[
             continue
         field = make_field(row['family'], row['n'], seed, row['k'])
         threats, s, t, box = field.problem()
-        name = (f"fresh_s{seed}_{row['family']}_n{row['n']}_f{row['k']}_"
-                f"w{row['w']:g}_{row['limits']}").replace('.', 'p')
+        stem = f"fresh_s{seed}_{row['family']}_n{row['n']}_f{row['k']}"
+        name = f"{stem}_w{row['w']:g}_{row['limits']}".replace('.', 'p')
         text = (f"python -m bench fresh --seed {seed} --only {row['id']}: w {row['w']:g}, "
                 f"limits {row['limits']}; HEAD {head} J {row['head']['J']:.6g} against "
                 f"baseline {base} J {row['base']['J']:.6g} (x{r:.4f})")
@@ -222,7 +222,8 @@ def keep_regressions(rows: list[dict], seed: int, head: str, base: str) -> list[
         path = REGRESSIONS / f'{name}.yaml'
         save_scenario(Scenario(name=name, frame_id='map', description=text, box=box,
                                start=s, goal=t, threats=threats), path,
-                      threats_file=f'{name}.npy' if row['n'] >= NPY_FROM else None)
+                      # One table a field: its cases at other w and limits share it.
+                      threats_file=f'{stem}.npy' if row['n'] >= NPY_FROM else None)
         written.append(path)
     return written
 
