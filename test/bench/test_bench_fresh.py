@@ -127,3 +127,22 @@ def test_a_baseline_that_failed_the_check_is_not_a_yardstick():
     assert fr.ratio(row, 'base') is None
     assert fr.badness(row) == 0.0
     assert fr.worst_cases([row], seed=5)[2].endswith('--seed 5 --only case0` |')
+
+
+def test_a_case_above_the_baseline_is_kept_as_a_scenario_that_loads_back(
+        tmp_path, monkeypatch):
+    from threat_planner.core.inputs.scenario import load_scenario
+    monkeypatch.setattr(fresh, 'REGRESSIONS', tmp_path)
+    rows = [{**_row(0, 1.002), 'family': 'ground', 'n': 20, 'id': 'ground-n20-f0-w0.5-on'},
+            {**_row(1, 1.5, limits='off'), 'family': 'coplanar', 'n': 1000},
+            _row(2, 1.001)]
+    written = fresh.keep_regressions(rows, 9, 'head', 'base')
+    assert [p.name for p in written] == ['fresh_s9_ground_n20_f0_w0p5_on.yaml',
+                                         'fresh_s9_coplanar_n1000_f0_w0p5_off.yaml']
+    assert (tmp_path / 'fresh_s9_coplanar_n1000_f0.npy').exists()
+    for path, (family, n) in zip(written, (('ground', 20), ('coplanar', 1000))):
+        sc, f = load_scenario(path), ff.make_field(family, n, 9)
+        assert np.array_equal(sc.threats.positions, f.positions)
+        assert np.array_equal(sc.threats.intensities, f.intensities)
+        assert np.array_equal(sc.start, f.start) and np.array_equal(sc.goal, f.goal)
+    assert '--seed 9 --only ground-n20-f0-w0.5-on' in load_scenario(written[0]).description
