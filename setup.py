@@ -2,12 +2,30 @@ from glob import glob
 import os
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 
 from setuptools import find_packages, setup
 from setuptools.command.build_py import build_py
 from setuptools.command.develop import develop
 
 package_name = 'threat_planner'
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def package_version(manifest=os.path.join(HERE, 'package.xml')):
+    """Return ``<version>`` of package.xml, the one place the version is written.
+
+    ROS's tools (bloom, catkin_pkg, rosdep) read it there; threat_planner.__version__ and
+    ``threat-planner --version`` read the same file or the metadata built from it. A
+    manifest without a version, or another package's, stops the build with the reason.
+    """
+    root = ET.parse(manifest).getroot()
+    name = (root.findtext('name') or '').strip()
+    found = (root.findtext('version') or '').strip()
+    if name != package_name or not found:
+        raise SystemExit(f'{manifest}: expected <name>{package_name}</name> and a '
+                         f'<version>, found name {name!r}, version {found!r}')
+    return found
 
 
 def compile_kernels(where):
@@ -50,7 +68,7 @@ class DevelopAndCompile(develop):
 
 setup(
     name=package_name,
-    version='0.1.0',
+    version=package_version(),
     packages=find_packages(exclude=['test', 'bench', 'bench.*']),
     # the Fast DDS discovery profile the executables load (threat_planner/ros/discovery.py)
     package_data={'threat_planner.ros': ['fastdds_discovery.xml']},

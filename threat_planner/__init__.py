@@ -7,6 +7,7 @@ conversions), ``bag`` (MCAP recording and replay), ``cli`` (``threat-planner``).
 
 The names from ``core`` load on first use (PEP 562): ``import threat_planner.ros.entry``
 must not pay numpy's and scipy's imports, so a node's plan process can start first.
+``__version__`` (``package.xml``'s, see :mod:`threat_planner._version`) loads the same way.
 """
 
 from threat_planner._lazy import lazy_names
@@ -17,6 +18,7 @@ __all__ = ['Box', 'Cost', 'InputError', 'PlanResult', 'PlannerConfig', 'Planning
            'RecordingError', 'Scenario', 'ScenarioError', 'ThreatField', 'ThreatPlannerError',
            'load_scenario', 'path_cost', 'plan']
 
-__getattr__, __dir__ = lazy_names(__name__, dict.fromkeys(
-    ('Box', 'Cost', 'PlanResult', 'PlannerConfig', 'Scenario', 'ThreatField', 'load_scenario',
-     'path_cost', 'plan'), 'threat_planner.core'), __all__)
+__getattr__, __dir__ = lazy_names(__name__, {
+    **dict.fromkeys(('Box', 'Cost', 'PlanResult', 'PlannerConfig', 'Scenario', 'ThreatField',
+                     'load_scenario', 'path_cost', 'plan'), 'threat_planner.core'),
+    '__version__': 'threat_planner._version'}, [*__all__, '__version__'])

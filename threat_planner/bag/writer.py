@@ -19,8 +19,6 @@ Typical use::
 
 import dataclasses
 import datetime
-import importlib
-import importlib.metadata
 import logging
 import os
 from pathlib import Path
@@ -30,6 +28,7 @@ from typing import Dict, Optional, Union
 
 from mcap.writer import CompressionType, LIBRARY_IDENTIFIER, Writer
 
+from threat_planner._version import __version__
 from threat_planner.bag.cdr import serialize_cdr
 from threat_planner.bag.definitions import (canonical_type_name, MESSAGE_ENCODING,
                                             message_definition, message_type_name, PROFILE,
@@ -50,12 +49,7 @@ DEFAULT_FLUSH_INTERVAL_S = 1.0
 
 
 def _library_string() -> str:
-    try:
-        ours = importlib.metadata.version('threat_planner')
-    except importlib.metadata.PackageNotFoundError:
-        # Running from a checkout that was never installed.
-        ours = 'dev'
-    return f'threat_planner/{ours} {LIBRARY_IDENTIFIER}'
+    return f'threat_planner/{__version__} {LIBRARY_IDENTIFIER}'
 
 
 def end_chunk(writer: Writer) -> None:

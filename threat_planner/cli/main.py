@@ -1,4 +1,4 @@
-"""Command line: ``threat-planner plan | paper | replay | batch | bag``.
+"""Command line: ``threat-planner plan | paper | replay | batch | bag`` (and ``--version``).
 
 Errors in the user's input (a bad scenario file, a bad option value) exit with status 2 and
 one line on stderr, never a traceback.
@@ -14,6 +14,7 @@ import os
 import sys
 import threading
 
+from threat_planner._version import __version__
 from threat_planner.cli.bag import add_bag_commands
 from threat_planner.cli.batch import (add_batch_command, add_robust_options, robust_plan,
                                       robust_summary)
@@ -142,6 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser of ``threat-planner``."""
     parser = _Parser(prog='threat-planner',
                      description='Threat-aware 3-D UAV path planning (Qu, Zhang, Zhang).')
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}',
+                        help="print the package's version (package.xml's) and exit")
     sub = parser.add_subparsers(dest='command', required=True, parser_class=_Parser)
 
     def planner_options(p: argparse.ArgumentParser) -> None:
