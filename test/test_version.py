@@ -3,6 +3,7 @@
 import importlib.metadata
 import json
 from pathlib import Path
+import re
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -14,6 +15,9 @@ from threat_planner import _version
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = Path(sys.executable).with_name('threat-planner')
+CHANGELOG = ROOT / 'CHANGELOG.md'
+#: A release's heading: version, then its tag's date or, until the tag is made, Unreleased.
+RELEASE = re.compile(r'^## (\d+\.\d+\.\d+) - (Unreleased|\d{4}-\d{2}-\d{2})$', re.M)
 
 
 def manifest_version() -> str:
@@ -76,3 +80,34 @@ def test_a_manifest_that_is_not_ours_or_is_broken_gives_no_version(tmp_path, tex
     (tmp_path / 'package.xml').write_text(text)
     assert _version.package_xml_version(tmp_path / 'package.xml') is None
     assert _version.package_xml_version(tmp_path / 'missing.xml') is None
+
+
+def releases() -> list[tuple[str, str]]:
+    return RELEASE.findall(CHANGELOG.read_text())
+
+
+def test_the_changelog_s_newest_release_is_the_package_s_version():
+    (newest, _), *_ = releases()
+    assert newest == manifest_version() == threat_planner.__version__
+
+
+def test_the_changelog_lists_releases_newest_first_and_only_the_newest_unreleased():
+    found = releases()
+    versions = [tuple(map(int, v.split('.'))) for v, _ in found]
+    assert versions == sorted(set(versions), reverse=True)
+    assert 'Unreleased' not in [date for _, date in found[1:]]
+    # Every second-level heading is a release's: one misspelt would escape the checks.
+    headings = [line for line in CHANGELOG.read_text().splitlines() if line.startswith('## ')]
+    assert len(headings) == len(found), headings
+
+
+def test_a_tagged_release_is_dated_as_its_tag_and_an_untagged_one_is_unreleased():
+    """Tagging v<version> without dating its heading fails here (no tags: nothing to check)."""
+    for version, date in releases():
+        p = subprocess.run(['git', 'log', '-1', '--format=%cs', f'v{version}^{{commit}}'],
+                           cwd=ROOT, capture_output=True, text=True)
+        tagged = p.returncode == 0
+        if date == 'Unreleased':
+            assert not tagged, f'v{version} is tagged: date its heading in CHANGELOG.md'
+        elif tagged:
+            assert p.stdout.strip() == date, f'v{version} was tagged on {p.stdout.strip()}'
