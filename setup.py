@@ -82,7 +82,10 @@ setup(
         ('share/' + package_name + '/scenarios', glob('test/data/*.yaml')),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'networkx', 'PyYAML', 'matplotlib', 'tqdm',
-                      'threadpoolctl', 'numba', 'pyarrow'],
+                      'threadpoolctl',
+                      # the minor release tested here; python -m bench numba_newest runs
+                      # the newest beside it (bench/results/numba_newest.md)
+                      'numba>=0.68,<0.69', 'pyarrow'],
     extras_require={
         'ros': [
             'ros-jazzy-rclpy[fastrtps]',

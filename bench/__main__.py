@@ -46,6 +46,8 @@ SUITES: dict[str, tuple[str, str, str]] = {
                      'publish a threat picture, receive path: the node end to end'),
     'node_start': ('bench.suites.node_start', 'main',
                    'planner_node of two checkouts started in turns: seconds to its first path'),
+    'numba_newest': ('bench.suites.numba_newest', 'main',
+                     'the bundled 20-threat cases with the newest numba beside the pinned one'),
     'paper_methods': ('bench.suites.paper_methods', 'main',
                       'paper and improved at 20 threats, beside a base checkout'),
     'perturbation': ('bench.suites.perturbation', 'main',
