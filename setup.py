@@ -97,7 +97,8 @@ setup(
             'ros-jazzy-diagnostic-msgs',
             'ros-jazzy-lifecycle-msgs',
         ],
-        'record': ['mcap', 'mcap-ros2-support'],
+        # mcap 1.6's public Writer.flush ends a chunk: the recorder's crash-safety flush
+        'record': ['mcap>=1.6', 'mcap-ros2-support'],
         'test': ['pytest', 'pytest-xdist', 'hypothesis', 'flake8', 'pydocstyle', 'rosbags',
                  'colcon-core', 'colcon-ros', 'colcon-python-setup-py',
                  # readers of the exports (issue 26): ArduPilot / QGC files, MAVSDK, GeoJSON

@@ -271,12 +271,16 @@ def test_rclpy_qos_profiles_are_accepted(tmp_path):
     assert yaml.safe_load(channel.metadata['offered_qos_profiles']) == [LATCHED_QOS.as_dict()]
 
 
-def test_mcap_can_end_a_chunk():
-    """The crash-safety flush needs mcap's Writer.flush or its private __finalize_chunk.
+def test_the_crash_safety_flush_uses_mcap_s_public_api_only():
+    """mcap >= 1.6's Writer.flush ends the chunk in progress; no private name of mcap is used.
 
-    If a new mcap release drops both, this fails loudly instead of recordings silently
-    losing their last second on a crash (see threat_planner.bag.writer.end_chunk).
+    setup.py's 'record' extra asks for that floor; the fallback to the private
+    ``__finalize_chunk`` that older releases needed is gone.
     """
+    import importlib.metadata
     from mcap.writer import Writer
-    assert callable(getattr(Writer, 'flush', None)) or \
-        callable(getattr(Writer, '_Writer__finalize_chunk', None))
+    major, minor = map(int, importlib.metadata.version('mcap').split('.')[:2])
+    assert (major, minor) >= (1, 6) and callable(getattr(Writer, 'flush', None))
+    private = [str(f.relative_to(REPO)) for f in (REPO / 'threat_planner').rglob('*.py')
+               if '_Writer__' in f.read_text()]
+    assert private == []

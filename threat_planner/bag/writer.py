@@ -38,7 +38,7 @@ from threat_planner.bag.metadata import (bag_information, file_entry, io_reason,
 from threat_planner.bag.qos import as_topic_qos, TopicQos
 from threat_planner.errors import RecordingError
 
-__all__ = ['DEFAULT_FLUSH_INTERVAL_S', 'McapRecorder', 'end_chunk']
+__all__ = ['DEFAULT_FLUSH_INTERVAL_S', 'McapRecorder']
 
 _LOG = logging.getLogger(__name__)
 
@@ -50,20 +50,6 @@ DEFAULT_FLUSH_INTERVAL_S = 1.0
 
 def _library_string() -> str:
     return f'threat_planner/{__version__} {LIBRARY_IDENTIFIER}'
-
-
-def end_chunk(writer: Writer) -> None:
-    """Write out the chunk in progress, so that it survives a crash.
-
-    mcap 1.x has no public call for this (``Writer.flush`` may come); until it does, the
-    private ``__finalize_chunk`` is used here and only here, and a test fails loudly when
-    neither exists.
-    """
-    public = getattr(writer, 'flush', None)
-    if public is not None:
-        public()
-    else:
-        writer._Writer__finalize_chunk()
 
 
 @dataclasses.dataclass
@@ -407,7 +393,8 @@ class McapRecorder:
             raise RecordingError(f'{self._path}: recording stopped after: {self._failed}')
         try:
             if self._pending:
-                end_chunk(self._writer)
+                # mcap >= 1.6 (setup.py): ends the chunk in progress and writes it out.
+                self._writer.flush()
             self._stream.flush()
             if self._pending and self._bag_dir is not None:
                 # Keeps a killed bag playable with counts up to the last flush.
