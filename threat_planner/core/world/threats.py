@@ -22,6 +22,8 @@ from threat_planner.errors import InputError
 if TYPE_CHECKING:  # imported where a tree is built: scipy.spatial is 0.3 s to import
     from scipy.spatial import cKDTree
 
+    from threat_planner.core.world.far_field import FarField
+
 
 #: Largest coordinate magnitude accepted anywhere [m]. Beyond it double-precision geometry
 #: stops being geometry: at 1e12 m neighbouring doubles are 0.1 mm apart and d^4 of the
@@ -185,6 +187,14 @@ class ThreatField:
         from threat_planner.core import _scipy_first  # noqa: F401 (before any scipy)
         from scipy.spatial import cKDTree
         return cKDTree(self.positions)
+
+    def far_field(self, radius: float) -> 'FarField':
+        """The threats' cells for a cut-off of ``radius`` [m] (built once per radius)."""
+        key = ('far_field', float(radius))
+        if key not in self._cache:
+            from threat_planner.core.world.far_field import FarField
+            self._cache[key] = FarField(self.positions, self.intensities, radius)
+        return self._cache[key]
 
     @cached_property
     def total_intensity(self) -> float:
