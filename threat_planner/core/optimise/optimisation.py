@@ -204,10 +204,8 @@ def minimise_cost(points: NDArray, threats: ThreatField, w: float, box: Box | No
     # (big300_0: reach 220 m, spacing 150 m) the coarse rounds ended in basins 3 to 300
     # times the direct rounds' J.
     counts = [n - 1]
-    longest = _longest_coarse_segment(threats, box)
-    length = float(np.linalg.norm(np.diff(x, axis=0), axis=1).sum())
-    while (counts[-1] // 2 >= COARSE_LEVEL_SEGMENTS and not constrained_only and not crowded
-           and length / (counts[-1] // 2) <= longest):
+    fewest = max(COARSE_LEVEL_SEGMENTS, _fewest_coarse_segments(x, threats, box))
+    while counts[-1] // 2 >= fewest and not constrained_only and not crowded:
         counts.append(counts[-1] // 2)
     coarse = len(counts) > 1
     probe = _Level(resample(x, counts[-1]), threats, w, box, limits, cutoff,
@@ -307,6 +305,7 @@ class _Level:
             # pairs index the threats and then the cells' pseudo-threats.
             self.far = threats.far_field(cutoff)
             self.intensities = _frozen(self.far.intensities)
+            self.far_positions = _frozen(self.far.positions)
         self._off = (np.zeros(7), np.zeros(0), np.zeros((n, 3)))
 
     def clip(self, x: NDArray) -> NDArray:
@@ -314,21 +313,12 @@ class _Level:
         return np.clip(x, self.lo, self.hi)
 
     def pick_pairs(self, p: NDArray) -> None:
-        """Count the threats within the cut-off of p's segments (all without one)."""
-        if self.cutoff is None:
+        """Pick p's pairs under a cut-off: near threats exactly, far ones in cells."""
+        if self.far is None:
             return
-        if self.far is not None:
-            seg, thr = self.far.pairs(p[:-1], p[1:])
-            self.pairs = (np.ascontiguousarray(seg, np.int64),
-                          np.ascontiguousarray(thr, np.int64), _frozen(self.far.positions))
-            return
-        seg, thr, _ = self.threats.near_pairs(p[:-1], p[1:], self.cutoff)
-        if len(seg) == 0:
-            # No threat near: count none (an empty pair list would mean every pair).
-            self.pairs = (_NO_PAIRS, _NO_PAIRS, _NO_THREATS)
-        else:
-            self.pairs = (np.ascontiguousarray(seg, np.int64),
-                          np.ascontiguousarray(thr, np.int64), self.positions)
+        seg, thr = self.far.pairs(p[:-1], p[1:])
+        self.pairs = (np.ascontiguousarray(seg, np.int64), np.ascontiguousarray(thr, np.int64),
+                      self.far_positions)
 
     def value(self, p: NDArray, even: float, scale: float = 1.0) -> float:
         """Evaluate the objective without the limit term: J + spacing terms, over scale."""
@@ -411,9 +401,6 @@ class _Level:
                 best.reshape(self.n, 3) if has_best(state) else None)
 
 
-_NO_THREATS = _frozen(np.zeros((0, 3)))
-
-
 def _prolong(x: NDArray, count: int) -> NDArray:
     """Return x at ``count`` segments: cubic B-spline subdivision where that doubles them.
 
@@ -443,11 +430,12 @@ def _violation(x: NDArray, limits: FlightLimits) -> float:
     return float(np.max(-LimitTerm(limits, len(x)).values(x), initial=0.0))
 
 
-def _longest_coarse_segment(threats: ThreatField, box: Box | None) -> float:
-    """Longest segment of a coarse level [m]: COARSE_SPACINGS typical threat spacings."""
+def _fewest_coarse_segments(x: NDArray, threats: ThreatField, box: Box | None) -> float:
+    """Fewest segments of a coarse level of x: each at most COARSE_SPACINGS spacings."""
     if box is None or len(threats) == 0:
-        return np.inf
-    return COARSE_SPACINGS * threats.typical_spacing(box)
+        return 0.0
+    length = float(np.linalg.norm(np.diff(x, axis=0), axis=1).sum())
+    return length / (COARSE_SPACINGS * threats.typical_spacing(box))
 
 
 def is_crowded(threats: ThreatField, box: Box | None) -> bool:

@@ -189,7 +189,7 @@ class ThreatField:
         return cKDTree(self.positions)
 
     def far_field(self, radius: float) -> 'FarField':
-        """The threats' cells for a cut-off of ``radius`` [m] (built once per radius)."""
+        """Return the threats' cells for a cut-off of ``radius`` [m], built once per radius."""
         key = ('far_field', float(radius))
         if key not in self._cache:
             from threat_planner.core.world.far_field import FarField
