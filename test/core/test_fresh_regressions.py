@@ -18,7 +18,15 @@ CASES = sorted(DATA.glob('*.yaml'))
 LIMITS_OFF = {'max_climb_deg': 90.0, 'max_dive_deg': 90.0, 'min_turn_radius_m': 0.0}
 #: Above the release still, by the ratio measured when the case's fix was tried; strict,
 #: so a case that comes back under the release fails here until it is taken off the list.
-STILL_ABOVE: dict[str, str] = {}
+STILL_ABOVE: dict[str, str] = {
+    # Gate run of d89ec92's tree, seed 1796561117 (bench/results/fresh.md). With every
+    # threat counted exactly the first ends at 508.90 too: the cut-off of before found a
+    # lower basin by its error.
+    'fresh_s1796561117_uniform_n1000_f0_w0p8_on': '509.356 against the release 489.801',
+    'fresh_s1796561117_uniform_n10000_f1_w0p5_off': '1084.187 against 1077.830',
+    'fresh_s1796561117_strongweak_n10000_f0_w0p2_off': '1258.958 against 1255.568',
+    'fresh_s1796561117_strongweak_n10000_f1_w0p2_on': '1244.040 against 1228.722',
+}
 
 
 def _case(path: Path) -> tuple[float, bool, float]:
