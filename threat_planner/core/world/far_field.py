@@ -80,6 +80,9 @@ class FarField:
             offset += m
         self.positions = np.ascontiguousarray(np.vstack([pos] + extra_pos))
         self.intensities = np.ascontiguousarray(np.concatenate([f] + extra_f))
+        # Children of each cell (CSR, by level), and the members of each leaf.
+        self._children = {d: _csr(self._levels[d - 1][3], len(self._levels[d][0]))
+                          for d in range(1, len(self._levels))}
         self._members = np.argsort(self._leaf_of, kind='stable')
         self._member_start = np.searchsorted(self._leaf_of[self._members],
                                              np.arange(len(self._levels[0][0]) + 1))
@@ -102,28 +105,44 @@ class FarField:
         mid = 0.5 * (a + b)
         half = 0.5 * np.sqrt(((b - a) ** 2).sum(axis=1))
         seg_parts, idx_parts = [], []
-        # Top down: a cell counts where it is far and no ancestor counted already.
-        done = None             # (S, cells of this level): an ancestor counted
-        for depth in range(len(self._levels) - 1, -1, -1):
+        # Top down, only below cells that were neither far nor under a far one: a cell
+        # counts where it is far and no ancestor counted already.
+        top = len(self._levels) - 1
+        cells = len(self._levels[top][0])
+        s = np.repeat(np.arange(len(a)), cells)
+        c = np.tile(np.arange(cells), len(a))
+        for depth in range(top, -1, -1):
             lo, hi, extent, _, start = self._levels[depth]
-            gap = mid[:, None, :] - np.clip(mid[:, None, :], lo[None], hi[None])
-            dist = np.sqrt((gap ** 2).sum(axis=2)) - half[:, None]
-            far = (dist >= self.radius) & (dist >= OPENING * extent[None])
-            if done is None:
-                done = np.zeros_like(far)
-            s, c = np.nonzero(far & ~done)
-            seg_parts.append(s)
-            idx_parts.append(start + c)
-            done |= far
+            m = mid[s]
+            gap = m - np.clip(m, lo[c], hi[c])
+            dist = np.sqrt((gap ** 2).sum(axis=1)) - half[s]
+            far = (dist >= self.radius) & (dist >= OPENING * extent[c])
+            seg_parts.append(s[far])
+            idx_parts.append(start + c[far])
+            s, c = s[~far], c[~far]
             if depth:
-                done = done[:, self._levels[depth - 1][3]]
+                s, c = _expand(s, c, *self._children[depth])
+            # (s, c) in the order of a segments x cells table read row by row.
+            order = np.lexsort((c, s))
+            s, c = s[order], c[order]
         # Leaves neither counted nor under a counted cell: their members one by one.
-        s, c = np.nonzero(~done)
-        counts = self._member_start[c + 1] - self._member_start[c]
-        seg_parts.append(np.repeat(s, counts))
-        first = np.repeat(self._member_start[c] - np.cumsum(counts) + counts, counts)
-        idx_parts.append(self._members[first + np.arange(counts.sum())])
+        s, c = _expand(s, c, self._members, self._member_start)
+        seg_parts.append(s)
+        idx_parts.append(c)
         seg = np.concatenate(seg_parts).astype(np.int64)
         idx = np.concatenate(idx_parts).astype(np.int64)
         order = np.argsort(seg, kind='stable')
         return seg[order], idx[order]
+
+
+def _expand(s: NDArray, c: NDArray, items: NDArray, first: NDArray) -> tuple[NDArray, NDArray]:
+    """Each (s, c) as (s, item) for every item of c (CSR: items[first[c]:first[c + 1]])."""
+    counts = first[c + 1] - first[c]
+    at = np.repeat(first[c] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+    return np.repeat(s, counts), items[at]
+
+
+def _csr(parent: NDArray, count: int) -> tuple[NDArray, NDArray]:
+    """Return (items by parent, first item of each parent) for ``count`` parents."""
+    items = np.argsort(parent, kind='stable')
+    return items, np.searchsorted(parent[items], np.arange(count + 1))
