@@ -211,7 +211,7 @@ def _refine_seed(p: Problem, entry: tuple, route: list[int], best: Candidate | N
     """
     name, seq, coarse, broken = entry
     start = resample(coarse, p.config.n_points)
-    held = _held_start(p, start)
+    held = _held_start(p, start, seq or route, name)
     if best is not None and bound and usable(best) and best.levels:
         verdict: list[float] = []
         cand = _refine(p, start, seq or route, name, broken,
@@ -223,11 +223,11 @@ def _refine_seed(p: Problem, entry: tuple, route: list[int], best: Candidate | N
     else:
         cand = _refine(p, start, seq or route, name, broken)
     if held is not None and not (usable(cand) and cand.cost.J <= held.cost.J):
-        cand = _from_held_start(p, held, start, seq or route, name)
+        cand = _from_held_start(p, held, name)
     return (_polish(p, cand) if usable(cand) else cand), None
 
 
-def _held_start(p: Problem, start: NDArray) -> Candidate | None:
+def _held_start(p: Problem, start: NDArray, seq: list[int], name: str) -> Candidate | None:
     """Return a seed's start as a candidate where it meets the limits already, else None.
 
     A surface route is a lattice polyline along the box's faces, screened as it is: at 40
@@ -236,28 +236,27 @@ def _held_start(p: Problem, start: NDArray) -> Candidate | None:
     10,000-threat field (uniform, seed 0 of the issue's family, w 0.5) such a start at J
     1,083.6 was refined through levels at 32,460 and 2,620 to 2,593.
     """
-    cost = p.cost(start)
-    if not np.isfinite(cost.J):
-        return None
     check = p.check(start)
     if not check.feasible:
         return None
+    cost = p.cost(start)
+    if not np.isfinite(cost.J):
+        return None
     cfg = p.config
-    return Candidate(seq=[], initial=start, smoothed=None, smoothed_cost=None, final=start,
-                     k=float('nan'), steps=0, converged=True, cost=cost,
+    return Candidate(seq=seq, initial=np.vstack([p.s, p.network.nodes[seq], p.t]),
+                     smoothed=None, smoothed_cost=None, final=start, k=float('nan'),
+                     steps=0, converged=True, cost=cost,
                      angles=check_angles(start, cfg.max_pitch_deg, cfg.max_turn_deg),
-                     seed='', limit_check=check, limits_bound=True)
+                     seed=f'{name}, as screened', limit_check=check, limits_bound=True)
 
 
-def _from_held_start(p: Problem, held: Candidate, start: NDArray, seq: list[int],
-                     name: str) -> Candidate:
+def _from_held_start(p: Problem, held: Candidate, name: str) -> Candidate:
     """Refine a seed from its own feasible start, as a warm replan does; never above it."""
-    cand = refine(p, start, seq, f'{name}, from its start', warm=True, respace=False)
+    cand = refine(p, held.final, held.seq, f'{name}, from its start', warm=True,
+                  respace=False)
     if usable(cand) and cand.cost.J <= held.cost.J:
         cand.limits_bound = True
         return cand
-    held.seq, held.seed = seq, f'{name}, as screened'
-    held.initial = np.vstack([p.s, p.network.nodes[seq], p.t])
     return held
 
 

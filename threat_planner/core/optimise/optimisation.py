@@ -316,9 +316,7 @@ class _Level:
         """Pick p's pairs under a cut-off: near threats exactly, far ones in cells."""
         if self.far is None:
             return
-        seg, thr = self.far.pairs(p[:-1], p[1:])
-        self.pairs = (np.ascontiguousarray(seg, np.int64), np.ascontiguousarray(thr, np.int64),
-                      self.far_positions)
+        self.pairs = (*self.far.pairs(p[:-1], p[1:]), self.far_positions)
 
     def value(self, p: NDArray, even: float, scale: float = 1.0) -> float:
         """Evaluate the objective without the limit term: J + spacing terms, over scale."""

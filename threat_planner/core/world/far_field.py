@@ -55,7 +55,7 @@ class FarField:
         keys = np.floor((pos - origin) / (LEAF_CUTOFFS * self.radius)).astype(np.int64)
         cells, cell_of = np.unique(keys, axis=0, return_inverse=True)
         cell_of = cell_of.reshape(-1)
-        self._leaf_of = cell_of
+        cell_of_leaf = cell_of
         # Levels bottom up: (members' box lo, hi, its largest edge, parent, first index).
         self._levels: list[tuple] = []
         extra_pos, extra_f, offset = [], [], n
@@ -83,9 +83,7 @@ class FarField:
         # Children of each cell (CSR, by level), and the members of each leaf.
         self._children = {d: _csr(self._levels[d - 1][3], len(self._levels[d][0]))
                           for d in range(1, len(self._levels))}
-        self._members = np.argsort(self._leaf_of, kind='stable')
-        self._member_start = np.searchsorted(self._leaf_of[self._members],
-                                             np.arange(len(self._levels[0][0]) + 1))
+        self._members, self._member_start = _csr(cell_of_leaf, len(self._levels[0][0]))
 
     def pairs(self, a: NDArray, b: NDArray) -> tuple[NDArray, NDArray]:
         """(segment, index) pairs covering every threat once per segment, by segment.
