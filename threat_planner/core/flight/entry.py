@@ -1,0 +1,199 @@
+"""Leave the start along the vehicle's heading: the first turn keeps the turn radius.
+
+A plan from a vehicle in flight must start in the direction it flies: its first segment
+along the heading ``h`` (no turn at the start, which the fillet rule of
+:mod:`threat_planner.core.optimise.limits` does not check), the turns after it within
+the limits. :func:`enter` makes a plan so: its first vertex after the start becomes
+``start + l h`` (l > 0 free) and the next ENTRY_POINTS vertices move, to the least J of
+the static picture under every limit (SLSQP on the exact cost and the limits' smooth
+constraints), the rest of the path unchanged. Where the plan already leaves along the
+heading it is returned as it is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from threat_planner.core.cost.kernels import cost_gradient as cost_and_gradient
+from threat_planner.core.optimise.limits import (check_limits, constraint_jacobian,
+                                                 constraint_values, FlightLimits)
+from threat_planner.core.optimise.optimisation import aim
+from threat_planner.core.world.threats import Box, ThreatField
+from threat_planner.errors import InputError
+
+__all__ = ['ENTRY_POINTS', 'Entry', 'enter', 'unit_heading']
+
+#: Vertices after the start that move to bring the plan onto the heading.
+ENTRY_POINTS = 10
+#: A plan already leaves along the heading when its first segment is within this [rad].
+ALIGNED = 1e-9
+
+
+@dataclass(frozen=True)
+class Entry:
+    """A path that leaves along the heading, and how it was made.
+
+    Attributes
+    ----------
+    points : NDArray
+        The path (M, 3) [m].
+    changed : int
+        Vertices moved (0: the plan already left along the heading).
+    feasible : bool
+        Whether the path meets the limits and leaves along the heading.
+    turn_deg : float
+        Angle between the heading and the plan's first segment before [deg].
+
+    """
+
+    points: NDArray
+    changed: int
+    feasible: bool
+    turn_deg: float
+
+
+def unit_heading(value: ArrayLike, name: str = 'start_heading') -> NDArray:
+    """A heading from a vector (3,) or from ``[yaw, pitch]`` [deg], as a unit vector.
+
+    Raises
+    ------
+    InputError
+        Naming `name` for a non-finite, zero or wrongly sized value.
+
+    """
+    v = np.asarray(value, float).reshape(-1)
+    if not np.all(np.isfinite(v)) or len(v) not in (2, 3):
+        raise InputError(f'{name}: expected [x, y, z] or [yaw_deg, pitch_deg], finite, got '
+                         f'{v.tolist()}')
+    if len(v) == 2:
+        yaw, pitch = np.radians(v)
+        v = np.array([math.cos(pitch) * math.cos(yaw), math.cos(pitch) * math.sin(yaw),
+                      math.sin(pitch)])
+    n = float(np.linalg.norm(v))
+    if n == 0:
+        raise InputError(f'{name}: a zero vector has no direction')
+    return v / n
+
+
+def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box | None,
+          w: float, limits: FlightLimits) -> Entry:
+    """Return the plan `points` made to leave its start along `heading` (module docstring).
+
+    Parameters
+    ----------
+    points : array_like
+        A plan (M, 3) [m] from the start.
+    heading : array_like
+        Unit direction the vehicle flies at the start.
+    threats : ThreatField
+        The static picture the plan was made in (its J is minimised).
+    box : Box, optional
+        Bounds the moved vertices stay in.
+    w : float
+        Threat weight.
+    limits : FlightLimits
+        The limits every turn and segment must meet.
+
+    Returns
+    -------
+    Entry
+
+    """
+    from scipy.optimize import minimize
+    pts = np.array(points, float)
+    h = np.asarray(heading, float) / np.linalg.norm(heading)
+    first = pts[1] - pts[0]
+    turn = math.acos(float(np.clip(first @ h / max(np.linalg.norm(first), 1e-300), -1, 1)))
+    if turn <= ALIGNED or len(pts) < 3:
+        ok = turn <= ALIGNED and check_limits(pts, limits, _floor(box)).feasible
+        return Entry(pts, 0, ok, math.degrees(turn))
+    if len(pts) < 4:   # one free vertex is too few to turn in: add vertices evenly
+        pts = np.vstack([pts[:1], pts[0] + np.linspace(0, 1, 5)[1:-1, None] * (
+            pts[1] - pts[0]), pts[1:]])
+    k = min(ENTRY_POINTS, len(pts) - 3)
+    # Window: start, P1 = start + l h, P2..Pk free, then up to three fixed vertices. The
+    # window's last segment is all of the last vertex's share, in the path half of it
+    # unless it ends at the goal: that row (of fixed vertices only) is dropped.
+    s = pts[0]
+    fixed_tail = pts[k + 1:k + 4]
+    drop = k + 4 < len(pts)
+    scale = float(np.linalg.norm(pts[-1] - pts[0])) or 1.0
+    guess = _turn_in(s, h, pts[k + 1], k, 1.2 * limits.min_turn_radius_m)
+    x0 = np.concatenate([[max(float(np.linalg.norm(guess[0] - s)), 1e-3) / scale],
+                         (guess[1:] / scale).ravel()])
+    positions, f = threats.positions, threats.intensities
+
+    def window(x: NDArray) -> NDArray:
+        p1 = s + x[0] * scale * h
+        return np.vstack([s[None], p1[None], x[1:].reshape(-1, 3) * scale, fixed_tail])
+
+    def chain(d_window: NDArray) -> NDArray:
+        """d/dx from d/d(window vertices)."""
+        return np.concatenate([[d_window[1] @ h * scale],
+                               (d_window[2:k + 1] * scale).ravel()])
+
+    j0 = abs(cost_and_gradient(window(x0), positions, f, w)[0]) or 1.0
+
+    def objective(x: NDArray) -> tuple[float, NDArray]:
+        j, g = cost_and_gradient(window(x), positions, f, w)
+        return j / j0, chain(g) / j0
+
+    radius_on = limits.radius_on
+    target = aim(limits)   # a hair inside, as the planner's optimisers aim
+
+    def cons(x: NDArray) -> NDArray:
+        g = constraint_values(window(x), target)
+        return g[:-1] if radius_on and drop else g
+
+    def cons_jac(x: NDArray) -> NDArray:
+        jac = constraint_jacobian(window(x), target)
+        if radius_on and drop:
+            jac = jac[:-1]
+        return np.stack([chain(row) for row in jac]) if len(jac) else np.zeros((0, len(x)))
+
+    bounds = [(1e-6 / scale, None)]
+    if box is not None:
+        lo = box.lo.copy()
+        lo[2] += limits.min_altitude_m
+        bounds += [(a / scale, b / scale) for _ in range(k - 1)
+                   for a, b in zip(lo, box.hi)]
+    else:
+        bounds += [(None, None)] * (3 * (k - 1))
+    res = minimize(objective, x0, jac=True, method='SLSQP', bounds=bounds,
+                   constraints=[{'type': 'ineq', 'fun': cons, 'jac': cons_jac}],
+                   options={'maxiter': 200, 'ftol': 1e-9})
+    out = pts.copy()
+    out[:k + 1] = window(res.x)[:k + 1]
+    ok = check_limits(out, limits, _floor(box)).feasible
+    return Entry(out, k, ok, math.degrees(turn))
+
+
+def _turn_in(s: NDArray, h: NDArray, target: NDArray, k: int, radius: float) -> NDArray:
+    """k points evenly along an arc of `radius` from `s` leaving along `h`, then straight
+    on to `target`: the start SLSQP refines (a smooth turn-in, near the limits)."""
+    to = target - s
+    m = to - (to @ h) * h
+    if np.linalg.norm(m) < 1e-12 or radius <= 0:
+        path = np.array([s, target])
+    else:
+        m = m / np.linalg.norm(m)
+        phi = np.linspace(0.0, math.pi, 721)
+        arc = s + radius * (np.sin(phi)[:, None] * h + (1 - np.cos(phi))[:, None] * m)
+        tangent = np.cos(phi)[:, None] * h + np.sin(phi)[:, None] * m
+        rest = target - arc
+        miss = np.linalg.norm(np.cross(tangent, rest), axis=1) / np.maximum(
+            np.linalg.norm(rest, axis=1), 1e-300) + (np.einsum('ij,ij->i', tangent, rest) < 0)
+        j = int(np.argmin(miss))
+        path = np.vstack([arc[:j + 1], target[None]])
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    at = cum[-1] * np.arange(1, k + 1) / (k + 1)
+    return np.stack([np.interp(at, cum, path[:, c]) for c in range(3)], axis=1)
+
+
+def _floor(box: Box | None) -> float:
+    return float(box.lo[2]) if box is not None else -math.inf

@@ -1,0 +1,1 @@
+"""Simulated flights: events files, the point-mass vehicle, the fly loop (ROS-free)."""
