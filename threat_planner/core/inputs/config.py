@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from threat_planner.core.inputs.settings import PLANNER_SETTINGS
 
-__all__ = ['PlannerConfig']
+__all__ = ['PlannerConfig', 'TIMING_FIELDS']
 
 _D = {name: s.default for name, s in PLANNER_SETTINGS.items()}
+#: Fields that time a path but never shape it: no stage of the planner reads them.
+TIMING_FIELDS = ('speed_mps',)
 
 
 @dataclass(frozen=True)
@@ -34,6 +36,8 @@ class PlannerConfig:
         min_turn_radius_m: Smallest turn radius through 3 consecutive points ('best')
             [m]; 0 = off.
         min_altitude_m: Lowest height above the box floor ('best') [m]; 0 = off.
+        speed_mps: Cruise speed [m/s] that times the path (core/trajectory.py); no
+            stage of the planner reads it.
         entry_candidates: K nodes tried as entry and as exit (Case 1).
         candidates: How 'improved' picks them: 'spread' (Fig. 11) or 'nearest'.
         network: 'box' (threats and the box surface) or 'threats' (the paper's).
@@ -60,6 +64,7 @@ class PlannerConfig:
     max_dive_deg: float = _D['max_dive_deg']
     min_turn_radius_m: float = _D['min_turn_radius_m']
     min_altitude_m: float = _D['min_altitude_m']
+    speed_mps: float = _D['speed_mps']
     entry_candidates: int = _D['entry_candidates']
     candidates: str = _D['candidates']
     network: str = _D['network']
@@ -79,3 +84,10 @@ class PlannerConfig:
         for name, setting in PLANNER_SETTINGS.items():
             setting.check(getattr(self, name))
         return self
+
+    def plans_like(self, other: 'PlannerConfig') -> bool:
+        """Whether `other` makes the same paths: equal but for the :data:`TIMING_FIELDS`.
+
+        A warm start compares settings with it, so a new cruise speed alone keeps it warm.
+        """
+        return replace(self, **{f: getattr(other, f) for f in TIMING_FIELDS}) == other

@@ -205,6 +205,12 @@ SETTINGS: tuple[Setting, ...] = (
     Setting('min_altitude_m', float, 0.0,
             "Lowest height of the path above the box floor, start and goal exempt ('best'; "
             "0 = off)", unit='m', lo=0.0, hi=1.0e6, cli='min-altitude'),
+    # Trajectories (issue 44): the speed times the path (Path stamps, --json t and eta_s,
+    # the exports' DO_CHANGE_SPEED); no stage of the planner reads it, so it changes no plan.
+    Setting('speed_mps', float, 20.0,
+            'Cruise speed the path is flown at, which times it (pose stamps, t and eta_s, '
+            'the exports\' DO_CHANGE_SPEED); the path itself does not depend on it',
+            unit='m/s', lo=0.0, hi=1000.0, lo_open=True, cli='speed'),
     Setting('entry_candidates', int, 3, 'Network nodes tried as entry and as exit',
             lo=1, hi=64, cli='entry-candidates'),
     Setting('candidates', str, 'spread',

@@ -18,7 +18,8 @@ screening's where the flight limits did not bind; where they did, the slope-held
 screening's, capped by the lead over the next distinct basin refined under all the
 limits. The warm result is dropped for a cold plan when it breaks a limit the previous
 plan met. Crowded fields (threat reach at least the spacing,
-:func:`.optimisation.is_crowded`) always plan cold.
+:func:`.optimisation.is_crowded`) always plan cold. The cruise speed is not among the
+settings compared: it times a path and shapes none (``PlannerConfig.plans_like``).
 """
 
 from __future__ import annotations
@@ -89,7 +90,7 @@ def warm_path(previous: object, threats: ThreatField, s: NDArray, t: NDArray, bo
     p_threats, _, p_goal, p_box, p_config = previous.problem
     if config.method != 'best' or not config.optimise:
         return None, "cold: warm starts are for method 'best' with optimise"
-    if config != p_config:
+    if not config.plans_like(p_config):
         return None, 'cold: settings changed'
     diag = box.diagonal
     if not (np.array_equal(box.lo, p_box.lo) and np.array_equal(box.hi, p_box.hi)):
