@@ -1,11 +1,14 @@
 """A path in time: times are length over speed, headings are unit tangents, attitudes agree."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from threat_planner.core.inputs.config import PlannerConfig
+from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.planner import plan
 from threat_planner.core.trajectory import (eta, heading_quaternions, headings, point_times,
                                             quaternion_yaw_pitch, quaternions, segment_lengths,
                                             yaw_pitch)
@@ -142,3 +145,45 @@ def test_configs_that_differ_only_in_speed_plan_alike():
     assert a != b and hash(a) != hash(b)      # still distinct settings
     assert a.plans_like(b) and b.plans_like(a)
     assert not a.plans_like(PlannerConfig(w=0.6, speed_mps=7.5))
+
+
+# ---- the plan is timed, never shaped, by the speed -------------------------------------
+
+DATA = Path(__file__).resolve().parents[1] / 'data'
+
+
+@pytest.fixture(scope='module')
+def uniform():
+    sc = load_scenario(DATA / 'uniform20_0.yaml')
+    return sc, plan(sc.threats, sc.start, sc.goal, sc.box)
+
+
+@pytest.mark.parametrize('method', ['best', 'paper'])
+def test_the_speed_changes_no_plan_bit_for_bit(uniform, method):
+    sc, _ = uniform
+    base = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(method=method))
+    slow = plan(sc.threats, sc.start, sc.goal, sc.box,
+                PlannerConfig(method=method, speed_mps=3.5))
+    assert np.array_equal(base.path, slow.path)
+    assert np.array_equal(base.initial_path, slow.initial_path)
+    assert base.cost == slow.cost and base.node_sequence == slow.node_sequence
+    assert slow.speed_mps == 3.5 and base.speed_mps == 20.0
+    assert slow.eta_s == pytest.approx(base.eta_s * 20.0 / 3.5, rel=1e-12)
+
+
+def test_the_summary_times_the_path_points(uniform):
+    _, r = uniform
+    s = r.summary()
+    assert s['speed_mps'] == 20.0 and len(s['t']) == len(s['path'])
+    assert s['t'] == point_times(r.path, 20.0).tolist() and s['t'][0] == 0.0
+    assert s['eta_s'] == s['t'][-1] == r.eta_s
+
+
+def test_a_new_speed_alone_keeps_a_warm_replan_warm(uniform):
+    sc, first = uniform
+    start = first.path[2]      # flown two segments along the last path
+    warm = plan(sc.threats, start, sc.goal, sc.box, PlannerConfig(speed_mps=9.0),
+                warm_start=first)
+    assert warm.warm_note == 'warm' and warm.speed_mps == 9.0
+    other = plan(sc.threats, start, sc.goal, sc.box, PlannerConfig(w=0.6), warm_start=first)
+    assert other.warm_note == 'cold: settings changed'

@@ -35,7 +35,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _cmd_plan(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
-    cfg = config_from(args)
+    cfg = config_from(args, scenario)
     check_exports(args, scenario)
     progress = ProgressBar('sweep')
     if args.robust is not None:
@@ -61,6 +61,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     if result.clearance is not None:
         print(f'  clearance: zones {result.clearance.zones_m:.3f} m, terrain '
               f'{result.clearance.terrain_m:.3f} m above the floor')
+    print(f'  flight: {result.speed_mps:g} m/s, ETA {result.eta_s:.1f} s over '
+          f'{result.eta_s * result.speed_mps:.1f} m')
     print(f'  time: {result.timings_ms["total_ms"]:.1f} ms ({stages} ms)')
     robust = {}
     if args.robust is not None:
@@ -88,7 +90,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 def _cmd_paper(args: argparse.Namespace) -> int:
     from threat_planner.cli.reproduction import reproduce, W_SWEEP
     scenario = load_scenario(args.scenario)
-    cfg = config_from(args)
+    cfg = config_from(args, scenario)
     bar = ProgressBar('paper', 3 + len(W_SWEEP))
     tables = reproduce(scenario, args.out, cfg, progress=bar.tick)
     bar.close()

@@ -53,9 +53,16 @@ def overrides(args: argparse.Namespace) -> dict[str, object]:
             if getattr(args, s.name, None) is not None}
 
 
-def config_from(args: argparse.Namespace) -> PlannerConfig:
-    """Return the PlannerConfig of the command line's settings, validated."""
-    return replace(PlannerConfig(), **overrides(args)).validated()
+def config_from(args: argparse.Namespace, scenario: Optional[object] = None) -> PlannerConfig:
+    """Return the PlannerConfig of the command line's settings, validated.
+
+    A scenario's own ``speed`` [m/s] stands in for the default; ``--speed`` overrides it.
+    """
+    base = PlannerConfig()
+    speed = getattr(scenario, 'speed', None)
+    if speed is not None:
+        base = replace(base, speed_mps=speed)
+    return replace(base, **overrides(args)).validated()
 
 
 class ProgressBar:

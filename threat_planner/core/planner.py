@@ -270,4 +270,4 @@ def _result(problem: Problem, best: Candidate, warm_note: str = '') -> PlanResul
         warm=bool(warm_note), warm_note=warm_note, basin_margin=best.basin_margin,
         problem=(problem.threats, problem.s, problem.t, problem.box, config),
         clearance=None if problem.airspace is None
-        else problem.airspace.clearance(best.final))
+        else problem.airspace.clearance(best.final), speed_mps=config.speed_mps)

@@ -9,8 +9,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from threat_planner.core.cost.closed_form import Cost
+from threat_planner.core.inputs.settings import PLANNER_SETTINGS
 from threat_planner.core.optimise.limits import FlightLimits, LimitCheck
 from threat_planner.core.optimise.smoothing import AngleCheck
+from threat_planner.core.trajectory import point_times
 from threat_planner.core.world.threats import Box, ThreatField
 
 if TYPE_CHECKING:  # the network's module imports scipy.spatial, a third of a second
@@ -54,6 +56,8 @@ class PlanResult:
         problem: (threats, start, goal, box, config) planned, kept for warm starts.
         clearance: Smallest margins of the final path to the zones and the terrain
             floor (an ``airspace.Clearance``), or None without an airspace.
+        speed_mps: Cruise speed the path is timed at [m/s] (the setting's; it shaped
+            nothing).
     """
 
     method: str
@@ -85,6 +89,18 @@ class PlanResult:
     problem: tuple[ThreatField, NDArray, NDArray, Box, object] | None = None
     # airspace hook (issue 12): margins of the final path, None without an airspace.
     clearance: 'Clearance | None' = None  # noqa: F821
+    speed_mps: float = PLANNER_SETTINGS['speed_mps'].default
+
+    @property
+    def times(self) -> NDArray:
+        """Time over each point of ``path`` at ``speed_mps``, 0 at the start, (n+1,) [s]."""
+        return point_times(self.path, self.speed_mps)
+
+    @property
+    def eta_s(self) -> float:
+        """Flight time from start to goal along ``path`` at ``speed_mps`` [s]."""
+        times = self.times
+        return float(times[-1]) if len(times) else 0.0
 
     @property
     def feasible(self) -> bool:
@@ -99,11 +115,16 @@ class PlanResult:
 
     def summary(self) -> dict:
         """JSON-ready summary in the command line's ``--json`` layout."""
+        times = self.times
         return {
             'method': self.method,
             'w': self.w,
+            'speed_mps': self.speed_mps,
             'initial_path': self.initial_path.tolist(),
             'path': self.path.tolist(),
+            # Trajectory (issue 44): the time over each path point [s], 0 at the start.
+            't': times.tolist(),
+            'eta_s': float(times[-1]) if len(times) else 0.0,
             'cost': {'initial': self.initial_cost.as_dict(),
                      'smoothed': None if self.smoothed_cost is None
                      else self.smoothed_cost.as_dict(),

@@ -21,6 +21,8 @@ mappings take seconds even with libyaml.
 plans can be exported with latitudes and longitudes; with ``coordinates: geodetic`` every
 position of the file is given in WGS84 (:mod:`threat_planner.core.inputs.geodetic`), and
 ``terrain: {dem: FILE.tif}`` reads a GeoTIFF DEM (:mod:`threat_planner.core.geo.dem`).
+``speed: V`` [m/s] is the cruise speed the plan is flown at (the setting ``speed_mps``,
+which a command line's ``--speed`` overrides); it times the path and changes no plan.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ import yaml
 
 from threat_planner.core.geo.frames import Datum
 from threat_planner.core.inputs.geodetic import dem_terrain, frame_of, to_local
+from threat_planner.core.inputs.settings import PLANNER_SETTINGS
 from threat_planner.core.inputs.yaml_threats import load_document
 from threat_planner.core.world.airspace import Airspace
 from threat_planner.core.world.threats import Box, check_endpoints, ThreatField
@@ -56,6 +59,8 @@ class Scenario:
         threats: The threat field.
         airspace: No-fly zones and terrain.
         datum: WGS84 origin of the frame (East-North-Up), or None.
+        speed: Cruise speed [m/s] the file gives (key ``speed``), or None for the
+            setting's.
     """
 
     name: str
@@ -67,6 +72,7 @@ class Scenario:
     threats: ThreatField
     airspace: Airspace = field(default_factory=Airspace)
     datum: Optional[Datum] = None
+    speed: Optional[float] = None
 
     def to_dict(self) -> dict:
         """Return the scenario in the YAML file layout (local coordinates)."""
@@ -77,6 +83,7 @@ class Scenario:
             'start': self.start.tolist(), 'goal': self.goal.tolist(),
             'threats': [{'position': p.tolist(), 'intensity': float(f)}
                         for p, f in zip(self.threats.positions, self.threats.intensities)],
+            **({} if self.speed is None else {'speed': self.speed}),
         }
         if self.airspace:
             lethal = self.airspace.lethal_radii(len(self.threats))
@@ -90,7 +97,7 @@ class Scenario:
 #: Keys a scenario file may hold; the airspace keys are read by the airspace layer.
 TOP_KEYS = ('name', 'frame_id', 'description', 'bounds', 'start', 'goal', 'threats',
             'threats_file', 'no_fly_zones', 'terrain', 'lethal_radius', 'datum',
-            'coordinates')
+            'coordinates', 'speed')
 #: Suffixes a ``threats_file`` may have.
 THREATS_FILE_SUFFIXES = ('.npy', '.csv')
 BOUNDS_KEYS = ('min', 'max')
@@ -107,6 +114,20 @@ def _check_keys(mapping: dict, known: tuple, where: str, fail) -> None:
         # A key with control characters (a stray newline) is shown escaped: one line.
         name = str(key) if str(key).isprintable() else repr(str(key))[1:-1]
         raise fail(f'unknown field "{where}{name}"{hint} (known: {", ".join(known)})')
+
+
+def _speed(data: dict) -> Optional[float]:
+    """The file's cruise speed [m/s], checked as the setting ``speed_mps``; None if absent."""
+    if 'speed' not in data:
+        return None
+    value = data['speed']
+    try:
+        PLANNER_SETTINGS['speed_mps'].check(value)
+    except InputError as exc:
+        # The file's key, not the setting's: the user wrote 'speed'.
+        rule, got = str(exc).split(': ', 1)[1].rsplit(', got ', 1)
+        raise InputError(f'speed: {rule} [m/s], got {got}') from None
+    return float(value)
 
 
 def _is_header(line: str) -> bool:
@@ -251,13 +272,14 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
             threat_positions=threat_field.positions)
         airspace.check_point('start', start)
         airspace.check_point('goal', goal)
+        speed = _speed(data)
     except InputError as exc:
         raise fail(str(exc)) from None
     except (TypeError, ValueError, OverflowError) as exc:
         raise fail(f'bad value ({exc})') from None
     return Scenario(str(data.get('name', Path(source).stem)), str(data.get('frame_id', 'map')),
                     str(data.get('description', '') or ''), box, start, goal, threat_field,
-                    airspace, datum)
+                    airspace, datum, speed)
 
 
 def load_scenario(path: str | Path) -> Scenario:
