@@ -76,7 +76,7 @@ class FlightReport:
 
 
 def scenario_timeline(scenario) -> ThreatTimeline:
-    """The scenario's threats at t = 0 with their velocities and lethal radii."""
+    """Return the scenario's threats at t = 0 with their velocities and lethal radii."""
     lethal = scenario.airspace.lethal_radii(len(scenario.threats))
     return ThreatTimeline(scenario.threats, getattr(scenario, 'velocities', None), lethal)
 

@@ -58,7 +58,7 @@ class ReferencePath:
         return self.points[-1] + (s - self.length) * self.tangent(self.length)
 
     def tangent(self, s: float) -> NDArray:
-        """Unit direction of the segment at arc length `s`."""
+        """Return the unit direction of the segment at arc length `s`."""
         k = int(np.clip(np.searchsorted(self.s, s, side='right') - 1, 0, len(self.s) - 2))
         return _unit(self.points[k + 1] - self.points[k])
 
@@ -73,7 +73,7 @@ class ReferencePath:
         return float(s[int(np.argmin(dist))])
 
     def piece(self, s0: float, s1: float) -> NDArray:
-        """The polyline between arc lengths s0 < s1, ends included."""
+        """Return the polyline between arc lengths s0 < s1, ends included."""
         inner = self.points[(self.s > s0) & (self.s < s1)]
         return np.vstack([self.at(s0)[None], inner, self.at(s1)[None]])
 

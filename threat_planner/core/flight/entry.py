@@ -57,7 +57,7 @@ class Entry:
 
 
 def unit_heading(value: ArrayLike, name: str = 'start_heading') -> NDArray:
-    """A heading from a vector (3,) or from ``[yaw, pitch]`` [deg], as a unit vector.
+    """Return a heading from a vector (3,) or from ``[yaw, pitch]`` [deg], as a unit vector.
 
     Raises
     ------
@@ -173,8 +173,10 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
 
 
 def _turn_in(s: NDArray, h: NDArray, target: NDArray, k: int, radius: float) -> NDArray:
-    """k points evenly along an arc of `radius` from `s` leaving along `h`, then straight
-    on to `target`: the start SLSQP refines (a smooth turn-in, near the limits)."""
+    """Return `k` points on an arc of `radius` leaving `s` along `h`, then on to `target`.
+
+    This is the start SLSQP refines: a smooth turn-in, near the limits.
+    """
     to = target - s
     m = to - (to @ h) * h
     if np.linalg.norm(m) < 1e-12 or radius <= 0:

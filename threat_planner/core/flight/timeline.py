@@ -90,8 +90,11 @@ class ThreatTimeline:
 
     def move(self, t: float, index: int, position: ArrayLike | None = None,
              velocity: ArrayLike | None = None) -> None:
-        """From time `t`, put threat `index` at `position` (default: where it is) with
-        `velocity` (default: its velocity so far)."""
+        """Move threat `index` from time `t` [s].
+
+        It continues from `position` (default: where it is) with `velocity` (default:
+        its velocity so far).
+        """
         piece = self._current(index, 'move_threat')
         here = self._at(piece, t)
         self._off[piece] = float(t)
@@ -141,12 +144,12 @@ class ThreatTimeline:
         return self._arrays
 
     def active(self, t: float) -> NDArray:
-        """Indices of the pieces active at time `t` [s]."""
+        """Return the indices of the pieces active at time `t` [s]."""
         _, _, _, _, on, off, _ = self.pieces()
         return np.flatnonzero((on <= t) & (t < off))
 
     def snapshot(self, t: float) -> Snapshot:
-        """The threats active at time `t` [s], where they are then."""
+        """Return the threats active at time `t` [s], where they are then."""
         ids, f, origin, vel, on, _, lethal = self.pieces()
         k = self.active(t)
         pos = origin[k] + vel[k] * (t - on[k])[:, None]

@@ -117,7 +117,7 @@ def _check_keys(mapping: dict, known: tuple, where: str, fail) -> None:
 
 
 def _speed(data: dict) -> Optional[float]:
-    """The file's cruise speed [m/s], checked as the setting ``speed_mps``; None if absent."""
+    """Return the file's cruise speed [m/s], checked as ``speed_mps``; None if absent."""
     if 'speed' not in data:
         return None
     value = data['speed']
