@@ -153,7 +153,7 @@ def run_flood(client: RosClient, scenario: Scenario, rate: float, seconds: float
         'inputs_behind': stats(behind),
         'last_plan_answers_last_input': bool(plans)
         and int(plans[-1][1]['input_stamp_ns']) == last_ns
-        and stamp_to_ns(final_path.header.stamp) == last_ns,
+        and stamp_to_ns(final_path.header.stamp) == int(plans[-1][1]['t0_ns']),
         'drain_s': drain_s,
         # Every input received was planned, coalesced away or refused: nothing queued.
         'accounted': received == (int(last_info['plans_completed']) - 1

@@ -34,7 +34,7 @@ from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
 from threat_planner.core.inputs.scenario import Scenario  # noqa: E402
-from threat_planner.ros.conversions import ns_to_stamp  # noqa: E402
+from threat_planner.ros.conversions import ns_to_stamp, stamp_to_ns  # noqa: E402
 
 __all__ = ['cloud', 'domain_id', 'info', 'jitter', 'LATCHED', 'LATCHED_LOG', 'log_stamp',
            'NodeProcess', 'ParameterProbe', 'planner_command', 'pose', 'PYTHON', 'RosClient',
@@ -95,7 +95,10 @@ def subscribe_answers(client: RosClient, ns: str) -> None:
 
 def round_trip(client: RosClient, ns: str, msg: PointCloud2, timeout: float,
                what: str = '') -> tuple[float, float, dict]:
-    """Publish one picture to the node in `ns` and wait for the answers stamped like it.
+    """Publish one picture to the node in `ns` and wait for its answers.
+
+    ``plan_info`` carries the picture's stamp; the paths carry the plan's t0, which
+    ``plan_info`` names (``t0_ns``), so the path is picked from what arrived by that.
 
     Returns
     -------
@@ -106,15 +109,20 @@ def round_trip(client: RosClient, ns: str, msg: PointCloud2, timeout: float,
     """
     stamp = msg.header.stamp
     pub = client.publisher(f'{ns}/threats', PointCloud2)
-    t0 = time.perf_counter()
+    # The client stamps what it receives with time.monotonic(): the same clock here.
+    t0 = time.monotonic()
     pub.publish(msg)
-    client.wait_for(f'{ns}/path', lambda m: m.header.stamp == stamp, timeout)
-    t_path = time.perf_counter()
     values = info(client.wait_for(f'{ns}/plan_info', lambda m: m.header.stamp == stamp,
                                   timeout))
-    t_info = time.perf_counter()
+    t_info = time.monotonic()
     if values['level'] == 'ERROR':
         raise RuntimeError(f'{what or ns}: {values["message"]}')
+    start_ns = int(values['t0_ns'])
+
+    def answers(m) -> bool:
+        return stamp_to_ns(m.header.stamp) == start_ns
+    client.wait_for(f'{ns}/path', answers, timeout)
+    t_path = next(t for t, m in list(client.messages[f'{ns}/path']) if answers(m))
     return 1e3 * (t_path - t0), 1e3 * (t_info - t0), values
 
 

@@ -71,7 +71,7 @@ def test_the_committed_exports_come_from_the_readme_command(example_run):
         assert committed.splitlines()[0] == fresh.splitlines()[0]
     plan = json.loads(example_run.files['plan'].read_text())
     committed = json.loads((folder / 'valley.plan').read_text())
-    assert len(plan['mission']['items']) == len(committed['mission']['items']) == 16
+    assert len(plan['mission']['items']) == len(committed['mission']['items']) == 17
     assert plan['geoFence'] == committed['geoFence']      # zones do not depend on the plan
 
 
@@ -79,13 +79,16 @@ def test_waypoints_read_back_with_pymavlink(exported):
     from pymavlink import mavwp
     files, _, geo = exported
     loader = mavwp.MAVWPLoader()
-    assert loader.load(str(files['waypoints'])) == len(geo) + 1
+    assert loader.load(str(files['waypoints'])) == len(geo) + 2
     home = loader.wp(0)
     assert (home.frame, home.command) == (0, 16)
     np.testing.assert_allclose([home.x, home.y, home.z], geo[0], atol=1e-4)
+    speed = loader.wp(1)   # the plan's speed over the ground, before the first waypoint
+    assert (speed.frame, speed.command, speed.param1, speed.param3) == (2, 178, 1, -1)
+    assert speed.param2 == exported[1]['speed_mps'] == 20.0
     for i, p in enumerate(geo):
-        wp = loader.wp(i + 1)
-        assert (wp.seq, wp.frame, wp.command, wp.autocontinue) == (i + 1, 3, 16, 1)
+        wp = loader.wp(i + 2)
+        assert (wp.seq, wp.frame, wp.command, wp.autocontinue) == (i + 2, 3, 16, 1)
         assert abs(wp.x - p[0]) < 1e-9 and abs(wp.y - p[1]) < 1e-9   # 9 decimals
         assert abs(wp.z - (p[2] - geo[0][2])) < 1e-4
 
@@ -95,9 +98,12 @@ def test_plan_reads_back_with_mavsdk_point_for_point(exported):
     lib, mission = mavsdk_mission_raw()
     data = mission.import_qgroundcontrol_mission(str(files['plan']))
     items = data.mission_items
-    assert len(items) == len(geo)
+    assert len(items) == len(geo) + 1
+    speed, items = items[0], items[1:]
+    assert (speed.seq, speed.frame, speed.command) == (0, 2, 178)
+    assert (speed.param1, speed.param2, speed.param3) == (1, 20.0, -1)
     for i, (it, p) in enumerate(zip(items, geo)):
-        assert (it.seq, it.frame, it.command) == (i, 3, 16)
+        assert (it.seq, it.frame, it.command) == (i + 1, 3, 16)
         # MAVLink's int32 1e-7 deg (1.1 cm) and float32 altitude
         assert abs(it.x - p[0] * 1e7) <= 0.5 + 1e-6 and abs(it.y - p[1] * 1e7) <= 0.5 + 1e-6
         assert abs(it.z - (p[2] - geo[0][2])) < 1e-3
@@ -120,9 +126,10 @@ def test_waypoints_read_back_with_mavsdk_too(exported):
     lib, mission = mavsdk_mission_raw()
     items = mission.import_mission_planner_mission(str(files['waypoints'])).mission_items
     # item 0 is home, at its absolute height (MAV_FRAME_GLOBAL)
-    assert len(items) == len(geo) + 1
+    assert len(items) == len(geo) + 2
     assert items[0].frame == 0 and abs(items[0].z - geo[0][2]) < 1e-3
-    for it, p in zip(items[1:], geo):
+    assert (items[1].command, items[1].param2) == (178, 20.0)
+    for it, p in zip(items[2:], geo):
         assert it.frame == 3 and abs(it.z - (p[2] - geo[0][2])) < 1e-3
         assert abs(it.x - p[0] * 1e7) <= 0.5 + 1e-6 and abs(it.y - p[1] * 1e7) <= 0.5 + 1e-6
     lib.destroy()

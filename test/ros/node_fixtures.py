@@ -85,9 +85,10 @@ class PlannerProcess:
         return info(msg)
 
     def wait_plan(self, after_seq=None, timeout=60.0, pred=lambda i: True):
-        """The next successful plan's info, path and initial path (matched by stamp)."""
+        """The next successful plan's info, path and initial path (matched by stamp: the
+        paths carry the plan's t0, plan_info's ``t0_ns``)."""
         i = self.wait_info(lambda i: i['level'] != 'ERROR' and pred(i), after_seq, timeout)
-        stamp = int(i['input_stamp_ns'])
+        stamp = int(i['t0_ns'])
         path = self.client.wait_for(self.topic('path'),
                                     lambda m: stamp_to_ns(m.header.stamp) == stamp, 10.0)
         initial = self.client.wait_for(self.topic('initial_path'),

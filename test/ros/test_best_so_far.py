@@ -20,7 +20,7 @@ from threat_planner.core.cost.closed_form import path_cost
 from threat_planner.core.inputs.config import PlannerConfig
 from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.planner import plan
-from threat_planner.ros.conversions import path_from_msg
+from threat_planner.ros.conversions import path_from_msg, stamp_to_ns
 
 SCENARIO = load_scenario(REPO / 'test' / 'data' / 'uniform20_0.yaml')
 
@@ -84,8 +84,10 @@ def test_a_timed_out_node_plan_publishes_the_best_path_so_far(tmp_path):
                                  timeout=60.0))
         assert i['level'] == 'WARN' and 'timed out after' in i['message'], i['message']
         assert i['timed_out'] == 'True' and i['best_so_far'] == 'initial', i
-        path = client.wait_for('/late/path', lambda m: m.header.stamp.sec == 7)
-        initial = client.wait_for('/late/initial_path', lambda m: m.header.stamp.sec == 7)
+        t0 = int(i['t0_ns'])   # the paths carry the plan's t0, not the input's stamp
+        path = client.wait_for('/late/path', lambda m: stamp_to_ns(m.header.stamp) == t0)
+        initial = client.wait_for('/late/initial_path',
+                                  lambda m: stamp_to_ns(m.header.stamp) == t0)
         points = path_from_msg(path)
         assert (points == path_from_msg(initial)).all()
         assert len(points) == int(i['path_points']) >= 2

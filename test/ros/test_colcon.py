@@ -18,7 +18,7 @@ import pytest
 
 from node_harness import domain_id, info, REPO, ros_env, RosClient, stop_process
 from threat_planner.core.inputs.scenario import load_scenario
-from threat_planner.ros.conversions import path_from_msg
+from threat_planner.ros.conversions import path_from_msg, stamp_to_ns
 from threat_planner.ros.discovery import PROFILE_VARIABLES
 
 DOMAIN = domain_id(46)
@@ -118,8 +118,9 @@ def test_installed_planner_plans_published_scenario(install, tmp_path):
                                            [scenario.start, scenario.goal], atol=1e-9),
             timeout=60.0)
         assert len(path.poses) >= 2 and path.header.frame_id == 'map'
+        t0 = stamp_to_ns(path.header.stamp)   # plan_info names the paths' t0
         plan_info = client.wait_for('/plan_info',
-                                    lambda m: m.header.stamp == path.header.stamp, 10.0)
+                                    lambda m: int(info(m).get('t0_ns', -1)) == t0, 10.0)
         assert info(plan_info)['threats'] == '20'
         assert planner.poll() is None and publisher.poll() is None
     finally:

@@ -100,6 +100,27 @@ def test_path_single_point_empty_and_bad_input():
         conv.path_to_msg([[0, 0, 0], [1, math.nan, 0]], FRAME, STAMP)
 
 
+def test_path_poses_are_stamped_with_their_times_to_the_nanosecond():
+    from threat_planner.core.trajectory import point_times
+    points = np.array([[0.0, 0.0, 5.0], [30.0, 40.0, 5.0], [30.0, 40.0, 17.0]])
+    t0 = Time(sec=7, nanosec=999_999_900)
+    msg = conv.path_to_msg(points, FRAME, t0, point_times(points, 10.0))
+    assert msg.header.stamp == t0
+    ns = [conv.stamp_to_ns(p.header.stamp) for p in msg.poses]
+    # 50 m then 12 m at 10 m/s: 0, 5 and 6.2 s after t0, the nanoseconds carried over
+    assert ns == [7_999_999_900, 12_999_999_900, 14_199_999_900]
+    assert conv.path_to_msg(points, FRAME, t0).poses[2].header.stamp == t0
+
+
+def test_path_times_must_be_one_finite_non_negative_value_per_point():
+    points = np.zeros((3, 3))
+    with pytest.raises(InputError, match=r'path times: expected 3 \(one per point\), got 2'):
+        conv.path_to_msg(points, FRAME, STAMP, [0.0, 1.0])
+    for bad in ([0.0, math.nan, 1.0], [0.0, -1.0, 1.0]):
+        with pytest.raises(InputError, match='path times: must be finite and >= 0'):
+            conv.path_to_msg(points, FRAME, STAMP, bad)
+
+
 # ------------------------------------------------------------------- markers
 
 

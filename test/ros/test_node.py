@@ -81,8 +81,16 @@ def test_plan_matches_library(best_node):
     assert int(i['nodes']) == result.network.n_nodes
     assert i['feasible'] == str(result.feasible)
     assert i['level'] == ('OK' if result.feasible else 'WARN')
-    for m in (path, initial):
-        assert m.header.frame_id == 'map' and m.header.stamp == Time(sec=3, nanosec=5)
+    for m in (path, initial):   # stamped with the plan's t0; the markers with the input's
+        assert m.header.frame_id == 'map' and stamp_to_ns(m.header.stamp) == int(i['t0_ns'])
+        # a trajectory: pose k at t0 + its arc length / speed_mps (20 m/s)
+        points = path_from_msg(m)
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0),
+                                                              axis=1))])
+        after = np.array([stamp_to_ns(p.header.stamp) for p in m.poses]) - int(i['t0_ns'])
+        np.testing.assert_allclose(after, 1e9 * arc / 20.0, rtol=0, atol=1.0)
+    assert float(i['speed_mps']) == 20.0
+    assert float(i['eta_s']) == pytest.approx(result.cost.J_L / 20.0, rel=1e-9)
     net = best_node.client.wait_for(best_node.topic('network'),
                                     lambda m: m.markers[0].header.stamp == msg.header.stamp)
     assert {m.ns for m in net.markers} >= {'threats', 'nodes', 'network', 'path'}
@@ -141,7 +149,8 @@ def test_replans_after_threat_update(fast_node):
     seq = fast_node.last_seq()
     fast_node.threats.publish(msg)
     i, path, _ = fast_node.wait_plan(after_seq=seq)
-    assert int(i['input_seq']) == seq + 1 and path.header.stamp == Time(sec=15)
+    assert int(i['input_seq']) == seq + 1 and int(i['input_stamp_ns']) == 15 * 10**9
+    assert stamp_to_ns(path.header.stamp) == int(i['t0_ns'])
     assert not np.allclose(path_from_msg(path), path_from_msg(before))
     expected = expected_plan(msg, [0.0, 0.0, 50.0], [100.0, 100.0, 50.0],
                              node_parameters(method='paper'))

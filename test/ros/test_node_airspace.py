@@ -71,8 +71,9 @@ class Node:
         i = info(msg)
         if i['level'] == 'ERROR':
             return i, None
+        t0 = int(i['t0_ns'])   # the paths carry the plan's t0, not the input's stamp
         path = self.client.wait_for(f'{NS}/path',
-                                    lambda m: stamp_to_ns(m.header.stamp) == ns, 10.0)
+                                    lambda m: stamp_to_ns(m.header.stamp) == t0, 10.0)
         return i, path_from_msg(path)
 
     def zones(self, *zones):

@@ -112,7 +112,8 @@ def check_plan(client, case: Case, model: Model, values: dict, stamp: Time,
     """What is wrong with the plan answering `case` (`model` after it), or None."""
     if values['level'] not in ('OK', 'WARN'):
         return f'level {values["level"]}'
-    path = client.wait_for(f'{NS}/path', lambda m: m.header.stamp == stamp, 10.0,
+    t0 = int(values['t0_ns'])   # the paths carry the plan's t0, not the input's stamp
+    path = client.wait_for(f'{NS}/path', lambda m: stamp_to_ns(m.header.stamp) == t0, 10.0,
                            after=paths_before)
     points = path_from_msg(path)
     if not (np.allclose(points[0], model.start, atol=1e-6)

@@ -21,6 +21,7 @@ from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.inputs.settings import NODE_SETTINGS
 from threat_planner.core.world.threats import as_point, COORDINATE_LIMIT_M, ThreatField
 from threat_planner.errors import InputError
+from threat_planner.ros.conversions import stamp_to_ns
 from threat_planner.ros.parameters import descriptor
 
 DOMAIN = domain_id(61)
@@ -148,6 +149,7 @@ def test_frame_change_drops_the_old_picture_and_says_so(client, node):
                                frame_id='odom', stamp=stamp))
     i = node.answer(stamp.sec)
     assert 'J' in i and i['frame_id'] == 'odom', i
-    path = client.wait_for(f'{node.ns}/path', lambda m: m.header.stamp.sec == stamp.sec)
+    path = client.wait_for(f'{node.ns}/path',
+                           lambda m: stamp_to_ns(m.header.stamp) == int(i['t0_ns']))
     assert path.header.frame_id == 'odom'
     assert client.set_parameters(node.name, {'frame_id': 'map'})[0].successful

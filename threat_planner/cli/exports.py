@@ -76,11 +76,13 @@ def export_plan(args: argparse.Namespace, scenario, result, config,
     zones = scenario.airspace.zones
     if args.qgc:
         from threat_planner.export.qgc import write_qgc_plan
-        out = write_qgc_plan(output_file(args.qgc), path, datum, zones)
+        out = write_qgc_plan(output_file(args.qgc), path, datum, zones,
+                             config.speed_mps)
         lines.append(f'  QGroundControl plan: {out}')
     if args.waypoints:
         from threat_planner.export.waypoints import write_waypoints
-        lines.append(f'  waypoints: {write_waypoints(output_file(args.waypoints), path, datum)}')
+        out = write_waypoints(output_file(args.waypoints), path, datum, config.speed_mps)
+        lines.append(f'  waypoints: {out}')
     if args.geojson:
         from threat_planner.export.geojson import write_geojson
         props = {'J': float(result.cost.J) if args.max_waypoints is None else float(c.J),

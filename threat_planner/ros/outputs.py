@@ -6,6 +6,13 @@ soon as each is ready: ``'paths'`` (``initial_path`` and ``path``), then ``'done
 that may stop the plan early also gets the network route as soon as the search has it, and
 publishes it with :func:`timeout_outcome` (phase ``'timeout'``) when it stops the plan.
 :func:`outcome_messages` gives the (topic, message) pairs of a phase in publishing order.
+
+The paths are trajectories (issue 44): the header stamp is the plan's t0, the node clock
+when the input that asked for the plan arrived (``PlanRequest.received_ns``, the node's
+own clock, sim time included, which a plan process cannot read), and pose k is stamped
+t0 + t_k, the time over point k at the cruise speed ``speed_mps``
+(:func:`threat_planner.core.trajectory.point_times`). ``plan_info`` gives t0 as
+``t0_ns``, which is how a reader pairs the paths with the input they answer.
 """
 
 from __future__ import annotations
@@ -23,10 +30,12 @@ from visualization_msgs.msg import MarkerArray
 
 from threat_planner.core.cost.closed_form import Cost
 from threat_planner.core.result import PlanResult
+from threat_planner.core.trajectory import point_times
 from threat_planner.core.world.airspace import Airspace
 from threat_planner.core.world.threats import Box, ThreatField
 from threat_planner.errors import InputError, PlanningError
-from threat_planner.ros.conversions import network_markers, path_to_msg, plan_info_msg, stamp_to_ns
+from threat_planner.ros.conversions import (network_markers, ns_to_stamp, path_to_msg,
+                                            plan_info_msg, stamp_to_ns)
 from threat_planner.ros.conversions.markers import airspace_markers
 from threat_planner.ros.parameters import NodeSettings
 
@@ -66,6 +75,7 @@ class PlanOutcome:
     best_so_far: Optional[Path] = None
     best_so_far_cost: Optional[Cost] = None
     best_so_far_points: int = 0
+    best_so_far_eta_s: float = 0.0
     queue_ms: float = 0.0
     plan_ms: float = 0.0
     messages_ms: float = 0.0
@@ -105,11 +115,17 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
     outcome.queue_ms = max(0.0, 1e-6 * (now_ns() - request.received_ns))
     s = request.settings
 
+    start = ns_to_stamp(request.received_ns)   # the trajectory's t0
+
+    def timed(points) -> Path:
+        return path_to_msg(points, s.frame_id, start, point_times(points, s.config.speed_mps))
+
     def on_initial(points, cost: Cost) -> None:
         partial = PlanOutcome(request, queue_ms=outcome.queue_ms,
                               plan_ms=1e3 * (time.perf_counter() - t0))
-        partial.best_so_far = path_to_msg(points, s.frame_id, request.stamp)
+        partial.best_so_far = timed(points)
         partial.best_so_far_cost, partial.best_so_far_points = cost, len(points)
+        partial.best_so_far_eta_s = float(point_times(points, s.config.speed_mps)[-1])
         early(partial)
 
     # Here, not at the top: the node's own process imports this module but plans in a
@@ -122,8 +138,8 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
         t1 = time.perf_counter()
         outcome.plan_ms = 1e3 * (t1 - t0)
         outcome.result = result
-        outcome.initial_path = path_to_msg(result.initial_path, s.frame_id, request.stamp)
-        outcome.path = path_to_msg(result.path, s.frame_id, request.stamp)
+        outcome.initial_path = timed(result.initial_path)
+        outcome.path = timed(result.path)
     except (InputError, PlanningError) as exc:
         outcome.error, outcome.exception = str(exc), exc
     except Exception as exc:  # noqa: B902 - a planner bug must not kill the worker
@@ -175,7 +191,7 @@ def outcome_messages(phase: str, outcome: PlanOutcome,
                                               req.stamp))]
     info = plan_done_info(values, outcome.result, len(req.threats), req.stamp,
                           outcome.queue_ms, outcome.plan_ms, outcome.messages_ms,
-                          outcome.network_error)
+                          outcome.network_error, t0_ns=req.received_ns)
     network = [] if outcome.network is None else [('network', outcome.network)]
     return network + [('plan_info', info)]
 
@@ -226,6 +242,8 @@ def plan_timeout_info(values: Mapping[str, object], outcome: PlanOutcome) -> Dia
                    'method': req.settings.config.method, 'w': req.settings.config.w,
                    'threats': len(req.threats), 'J': cost.J, 'J_L': cost.J_L,
                    'J_R': cost.J_R, 'path_points': outcome.best_so_far_points,
+                   't0_ns': req.received_ns, 'speed_mps': req.settings.config.speed_mps,
+                   'eta_s': outcome.best_so_far_eta_s,
                    'queue_ms': outcome.queue_ms, 'plan_wall_ms': outcome.plan_ms})
     message = (f'plan for input #{req.seq} ({req.source}) {outcome.error}; '
                f'J={cost.J:.6g}')
@@ -307,7 +325,8 @@ def plan_markers(result: PlanResult, threats: ThreatField, box: Box, frame_id: s
 
 def plan_done_info(values: Mapping[str, object], result: PlanResult, n_threats: int,
                    stamp: Time, queue_ms: float, plan_ms: float, messages_ms: float,
-                   network_error: Optional[str] = None) -> DiagnosticArray:
+                   network_error: Optional[str] = None,
+                   t0_ns: Optional[int] = None) -> DiagnosticArray:
     """Build the ``plan_info`` of a finished plan (OK, or WARN if an angle limit is broken).
 
     Parameters
@@ -324,6 +343,8 @@ def plan_done_info(values: Mapping[str, object], result: PlanResult, n_threats: 
         Wait before planning, planning and marker drawing times [ms].
     network_error : str, optional
         Why the markers could not be drawn.
+    t0_ns : int, optional
+        The paths' header stamp, the trajectory's t0 [ns], given as ``t0_ns``.
 
     Returns
     -------
@@ -333,6 +354,8 @@ def plan_done_info(values: Mapping[str, object], result: PlanResult, n_threats: 
     """
     values = dict(values)
     values.update(_result_values(result, n_threats))
+    if t0_ns is not None:
+        values['t0_ns'] = int(t0_ns)
     values['queue_ms'] = queue_ms
     values['plan_wall_ms'] = plan_ms
     values['messages_ms'] = messages_ms
@@ -366,6 +389,9 @@ def _result_values(result: PlanResult, n_threats: int) -> dict[str, object]:
         'max_turn_deg': result.angles.max_turn_deg,
         'path_points': len(result.path),
         'initial_path_points': len(result.initial_path),
+        # Trajectory (issue 44): the path's poses are stamped t0 + t_k at this speed.
+        'speed_mps': result.speed_mps,
+        'eta_s': result.eta_s,
     }
     # Physical limits (method 'best'): those in force, the path's own values, the worst
     # violation ('' when feasible). Infinities (a straight path's radius) print as inf.

@@ -24,6 +24,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.task import Future
 
+from threat_planner.core.trajectory import point_times
 from threat_planner.errors import InputError, PlanningError
 from threat_planner.ros.conversions import path_to_msg
 from threat_planner.ros.inputs import accept, InputState
@@ -49,6 +50,8 @@ def plan_on_request(state: InputState, request: GetPlan.Request) -> tuple[Path, 
     -------
     tuple of (Path, str)
         The final path (empty on failure) and the reason of a failure ('' on success).
+        Its header has the goal's stamp, t0; pose k is stamped t0 plus the time over
+        point k at ``speed_mps``.
 
     """
     frame_id = state.settings.frame_id
@@ -64,7 +67,9 @@ def plan_on_request(state: InputState, request: GetPlan.Request) -> tuple[Path, 
         return _empty_path(frame_id, request), str(exc)
     except Exception as exc:  # noqa: B902 - a planner bug must not kill the service
         return _empty_path(frame_id, request), f'planner failed: {type(exc).__name__}: {exc}'
-    return path_to_msg(result.path, frame_id, request.goal.header.stamp), ''
+    # A trajectory from the requester's t0, the goal's stamp: pose k at t0 + t_k (issue 44).
+    times = point_times(result.path, s.settings.config.speed_mps)
+    return path_to_msg(result.path, frame_id, request.goal.header.stamp, times), ''
 
 
 def _empty_path(frame_id: str, request: GetPlan.Request) -> Path:

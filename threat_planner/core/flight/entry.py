@@ -103,18 +103,51 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
     Entry
 
     """
-    from scipy.optimize import minimize
     pts = np.array(points, float)
     h = np.asarray(heading, float) / np.linalg.norm(heading)
     first = pts[1] - pts[0]
-    turn = math.acos(float(np.clip(first @ h / max(np.linalg.norm(first), 1e-300), -1, 1)))
+    # atan2, not acos: acos loses half the digits near an angle of 0.
+    turn = math.atan2(float(np.linalg.norm(np.cross(first, h))), float(first @ h))
     if turn <= ALIGNED or len(pts) < 3:
         ok = turn <= ALIGNED and check_limits(pts, limits, _floor(box)).feasible
         return Entry(pts, 0, ok, math.degrees(turn))
     if len(pts) < 4:   # one free vertex is too few to turn in: add vertices evenly
         pts = np.vstack([pts[:1], pts[0] + np.linspace(0, 1, 5)[1:-1, None] * (
             pts[1] - pts[0]), pts[1:]])
-    k = min(ENTRY_POINTS, len(pts) - 3)
+    # SLSQP can stop on a failed line search short of feasible (about one heading in
+    # six on a 20-threat field): go on from where it stopped, then from a wider turn-in
+    # with twice the free vertices, and keep the first feasible path, else the least
+    # violating one.
+    best, best_excess = pts, math.inf
+    pitch = math.degrees(math.asin(float(np.clip(h[2], -1.0, 1.0))))
+    hopeless = ((limits.climb_on and pitch > limits.max_climb_deg)
+                or (limits.dive_on and -pitch > limits.max_dive_deg))
+    tries = ((ENTRY_POINTS, 1.2, 0),) if hopeless else (
+        (ENTRY_POINTS, 1.2, 1), (2 * ENTRY_POINTS, 1.6, 1))
+    for count, radius, restarts in tries:
+        k = min(count, len(pts) - 3)
+        x = None
+        for _ in range(1 + restarts):
+            out, x = _solve(pts, h, k, radius * limits.min_turn_radius_m, x, threats, box,
+                            w, limits)
+            check = check_limits(out, limits, _floor(box))
+            if check.feasible:
+                return Entry(out, k, True, math.degrees(turn))
+            excess = _relative_excess(check.violations, limits)
+            if excess < best_excess:
+                best, best_excess, changed = out, excess, k
+    return Entry(best, changed, False, math.degrees(turn))
+
+
+def _solve(pts: NDArray, h: NDArray, k: int, radius: float, x0: NDArray | None,
+           threats: ThreatField, box: Box | None, w: float, limits: FlightLimits
+           ) -> tuple[NDArray, NDArray]:
+    """Move vertices 1..k of `pts` (1 along `h`) to the least J under the limits.
+
+    Returns the path and SLSQP's variables, which a second call takes as `x0`; without
+    `x0` it starts from :func:`_turn_in` of `radius` [m].
+    """
+    from scipy.optimize import minimize
     # Window: start, P1 = start + l h, P2..Pk free, then up to three fixed vertices. The
     # window's last segment is all of the last vertex's share, in the path half of it
     # unless it ends at the goal: that row (of fixed vertices only) is dropped.
@@ -122,9 +155,10 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
     fixed_tail = pts[k + 1:k + 4]
     drop = k + 4 < len(pts)
     scale = float(np.linalg.norm(pts[-1] - pts[0])) or 1.0
-    guess = _turn_in(s, h, pts[k + 1], k, 1.2 * limits.min_turn_radius_m)
-    x0 = np.concatenate([[max(float(np.linalg.norm(guess[0] - s)), 1e-3) / scale],
-                         (guess[1:] / scale).ravel()])
+    if x0 is None:
+        guess = _turn_in(s, h, pts[k + 1], k, radius)
+        x0 = np.concatenate([[max(float(np.linalg.norm(guess[0] - s)), 1e-3) / scale],
+                             (guess[1:] / scale).ravel()])
     positions, f = threats.positions, threats.intensities
 
     def window(x: NDArray) -> NDArray:
@@ -132,7 +166,7 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
         return np.vstack([s[None], p1[None], x[1:].reshape(-1, 3) * scale, fixed_tail])
 
     def chain(d_window: NDArray) -> NDArray:
-        """d/dx from d/d(window vertices)."""
+        """Return d/dx from d/d(window vertices)."""
         return np.concatenate([[d_window[1] @ h * scale],
                                (d_window[2:k + 1] * scale).ravel()])
 
@@ -168,8 +202,7 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
                    options={'maxiter': 200, 'ftol': 1e-9})
     out = pts.copy()
     out[:k + 1] = window(res.x)[:k + 1]
-    ok = check_limits(out, limits, _floor(box)).feasible
-    return Entry(out, k, ok, math.degrees(turn))
+    return out, res.x
 
 
 def _turn_in(s: NDArray, h: NDArray, target: NDArray, k: int, radius: float) -> NDArray:
@@ -195,6 +228,15 @@ def _turn_in(s: NDArray, h: NDArray, target: NDArray, k: int, radius: float) -> 
     cum = np.concatenate([[0.0], np.cumsum(seg)])
     at = cum[-1] * np.arange(1, k + 1) / (k + 1)
     return np.stack([np.interp(at, cum, path[:, c]) for c in range(3)], axis=1)
+
+
+def _relative_excess(violations: dict[str, float], limits: FlightLimits) -> float:
+    """Return the largest breach relative to its limit, as check_limits ranks them."""
+    unit = {'climb_deg': max(limits.max_climb_deg, 1.0),
+            'dive_deg': max(limits.max_dive_deg, 1.0),
+            'turn_radius_m': limits.min_turn_radius_m,
+            'altitude_m': max(limits.min_altitude_m, 1.0)}
+    return max(v / unit[k] for k, v in violations.items())
 
 
 def _floor(box: Box | None) -> float:

@@ -1,5 +1,6 @@
-"""Paths as nav_msgs/Path, poses along the flight direction."""
+"""Paths as nav_msgs/Path: poses along the flight direction, stamped with their times."""
 
+from typing import Optional
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion
@@ -7,62 +8,34 @@ from nav_msgs.msg import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from threat_planner.ros.conversions._common import as_points, make_header
-
-# Segments shorter than this carry no usable direction (rounding noise would give
-# an arbitrary heading), so path_to_msg reuses the previous direction instead.
-_MIN_SEGMENT_M = 1e-9
-
-
-def _forward_fill(valid: NDArray[np.bool_]) -> NDArray[np.intp]:
-    """Index of the latest valid entry at or before each position (first valid before it)."""
-    idx = np.where(valid, np.arange(valid.size), -1)
-    idx = np.maximum.accumulate(idx)
-    idx[idx < 0] = int(np.argmax(valid))
-    return idx
+from threat_planner.core.trajectory import heading_quaternions
+from threat_planner.errors import InputError
+from threat_planner.ros.conversions._common import (as_points, make_header, ns_to_stamp,
+                                                    stamp_to_ns)
 
 
-def _heading_quaternions(points: NDArray[np.float64]) -> NDArray[np.float64]:
-    """
-    Quaternions (x, y, z, w) turning the body x axis along the path at each point.
-
-    Pose i looks along segment i -> i + 1 and the last pose along the last segment.
-    Zero-length segments reuse the previous direction (leading ones the first usable
-    one); a path with no usable segment gets identity orientations.
-    """
-    n = points.shape[0]
-    quats = np.zeros((n, 4), dtype=np.float64)
-    quats[:, 3] = 1.0
-    if n < 2:
-        return quats
-    seg = np.diff(points, axis=0)
-    valid = np.linalg.norm(seg, axis=1) > _MIN_SEGMENT_M
-    if not valid.any():
-        return quats
-    seg = seg[_forward_fill(valid)]
-    seg = np.vstack([seg, seg[-1:]])
-
-    yaw = np.arctan2(seg[:, 1], seg[:, 0])
-    # REP-103: rotating +x about +y by a positive angle points it down, so a climb
-    # is a negative pitch.
-    pitch = -np.arctan2(seg[:, 2], np.hypot(seg[:, 0], seg[:, 1]))
-    cy, sy = np.cos(yaw / 2.0), np.sin(yaw / 2.0)
-    cp, sp = np.cos(pitch / 2.0), np.sin(pitch / 2.0)
-    # q = q_z(yaw) * q_y(pitch): intrinsic Z-Y-X with zero roll.
-    quats[:, 0] = -sy * sp
-    quats[:, 1] = cy * sp
-    quats[:, 2] = sy * cp
-    quats[:, 3] = cy * cp
-    return quats
+def _pose_stamps(stamp: Time, times: Optional[ArrayLike], n: int) -> list[Time]:
+    """Return the stamp of each pose: `stamp` plus its time [s], to the nanosecond."""
+    if times is None:
+        return [stamp] * n
+    t = np.asarray(times, dtype=np.float64).reshape(-1)
+    if t.shape != (n,):
+        raise InputError(f'path times: expected {n} (one per point), got {t.size}')
+    if not (np.all(np.isfinite(t)) and np.all(t >= 0.0)):
+        raise InputError('path times: must be finite and >= 0 [s]')
+    t0 = stamp_to_ns(stamp)
+    return [ns_to_stamp(t0 + int(dt)) for dt in np.rint(t * 1e9)]
 
 
-def path_to_msg(points: ArrayLike, frame_id: str, stamp: Time) -> Path:
+def path_to_msg(points: ArrayLike, frame_id: str, stamp: Time,
+                times: Optional[ArrayLike] = None) -> Path:
     """
     Build a nav_msgs/Path whose poses point along the flight direction.
 
     Each pose's orientation turns the body x axis (the nose) along the segment to
-    the next waypoint with zero roll; the last pose keeps the last segment's
-    direction.  Zero-length segments reuse the previous direction.
+    the next waypoint with zero roll (:func:`threat_planner.core.trajectory.headings`);
+    the last pose keeps the last segment's direction, and zero-length segments reuse a
+    neighbour's.
 
     Parameters
     ----------
@@ -71,7 +44,11 @@ def path_to_msg(points: ArrayLike, frame_id: str, stamp: Time) -> Path:
     frame_id : str
         Frame of the waypoints, used for the path and every pose header.
     stamp : builtin_interfaces.msg.Time
-        Stamp for the path and every pose header.
+        Stamp of the path header: the trajectory's t0.
+    times : array_like, optional
+        Time over each waypoint after `stamp`, shape (n,) [s] (for example
+        :func:`threat_planner.core.trajectory.point_times`); pose k is stamped
+        ``stamp + times[k]``. None stamps every pose with `stamp`.
 
     Returns
     -------
@@ -81,19 +58,20 @@ def path_to_msg(points: ArrayLike, frame_id: str, stamp: Time) -> Path:
     Raises
     ------
     InputError
-        If `points` is not (n, 3) or holds NaN/inf.
+        If `points` is not (n, 3) or holds NaN/inf, or `times` is not n finite
+        non-negative values.
 
     """
     pts = as_points('path points', points)
-    quats = _heading_quaternions(pts)
-    header = make_header(frame_id, stamp)
-    msg = Path(header=header)
+    quats = heading_quaternions(pts)
+    stamps = _pose_stamps(stamp, times, len(pts))
+    msg = Path(header=make_header(frame_id, stamp))
     msg.poses = [
         PoseStamped(
-            header=make_header(frame_id, stamp),
+            header=make_header(frame_id, at),
             pose=Pose(position=Point(x=px, y=py, z=pz),
                       orientation=Quaternion(x=qx, y=qy, z=qz, w=qw)))
-        for (px, py, pz), (qx, qy, qz, qw) in zip(pts.tolist(), quats.tolist())
+        for (px, py, pz), (qx, qy, qz, qw), at in zip(pts.tolist(), quats.tolist(), stamps)
     ]
     return msg
 

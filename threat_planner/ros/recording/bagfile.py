@@ -108,6 +108,15 @@ class BagPlan:
         return int(self.values.get('input_stamp_ns', -1))
 
     @property
+    def path_stamp_ns(self) -> int:
+        """Header stamp of the paths published for it [ns]: ``t0_ns``, the trajectory's t0.
+
+        A recording made before the paths were trajectories has no ``t0_ns``; its paths
+        carry the input's stamp.
+        """
+        return int(self.values.get('t0_ns', self.stamp_ns))
+
+    @property
     def outcome(self) -> str:
         """``'OK'`` or ``'WARN'`` for a plan, ``'rejected'`` or ``'failed'`` for an error."""
         if self.level != 'ERROR':
@@ -274,8 +283,8 @@ def load_bag(path, *, tolerant: bool = False) -> Bag:
                         status.message, values)
         if plan_.level != 'ERROR':
             plan_.initial_path = _points_before(by_topic.get(f'{ns}/initial_path', []),
-                                                plan_.stamp_ns, m.log_time_ns)
-            plan_.path = _points_before(by_topic.get(f'{ns}/path', []), plan_.stamp_ns,
+                                                plan_.path_stamp_ns, m.log_time_ns)
+            plan_.path = _points_before(by_topic.get(f'{ns}/path', []), plan_.path_stamp_ns,
                                         m.log_time_ns)
         plans.append(plan_)
     return Bag(path, ns, node_name, parameters, recorded_params, inputs, plans, initial_msgs)

@@ -8,7 +8,8 @@ the recorded one: the ``initial_path`` node sequence, the largest distance betwe
 ``path`` points and the relative difference of J. Outputs are matched to inputs through
 ``plan_info``'s ``input_seq`` (the offset between the node's numbering and the
 recording's is found from ``input_source`` and ``input_stamp_ns``, so a recording started
-at run time works too) and the paths through their header stamp.
+at run time works too) and the paths through their header stamp (``plan_info``'s ``t0_ns``,
+or the input's stamp in a recording made before the paths were stamped as trajectories).
 
 The planner is deterministic, so a recording replays to the same plans to the last bit on
 the machine that made it; the default tolerance (1e-6 m and 1e-6 relative) absorbs the
