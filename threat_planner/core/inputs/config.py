@@ -10,7 +10,7 @@ __all__ = ['PlannerConfig', 'TIMING_FIELDS']
 
 _D = {name: s.default for name, s in PLANNER_SETTINGS.items()}
 #: Fields that time a path but never shape it: no stage of the planner reads them.
-TIMING_FIELDS = ('speed_mps',)
+TIMING_FIELDS = ('speed_mps', 'commit_s')
 
 
 @dataclass(frozen=True)

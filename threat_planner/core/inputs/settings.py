@@ -211,6 +211,11 @@ SETTINGS: tuple[Setting, ...] = (
             'Cruise speed the path is flown at, which times it (pose stamps, t and eta_s, '
             'the exports\' DO_CHANGE_SPEED); the path itself does not depend on it',
             unit='m/s', lo=0.0, hi=1000.0, lo_open=True, cli='speed'),
+    # Flight (issue 44): a replan in flight keeps this much of the trajectory being flown.
+    Setting('commit_s', float, 2.0,
+            'Time of the trajectory ahead of the vehicle a replan in flight keeps unchanged, '
+            'so the path never jumps under its follower (0 = replan from where it is)',
+            unit='s', lo=0.0, hi=60.0, cli='commit'),
     Setting('entry_candidates', int, 3, 'Network nodes tried as entry and as exit',
             lo=1, hi=64, cli='entry-candidates'),
     Setting('candidates', str, 'spread',
