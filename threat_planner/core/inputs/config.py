@@ -38,6 +38,8 @@ class PlannerConfig:
         min_altitude_m: Lowest height above the box floor ('best') [m]; 0 = off.
         speed_mps: Cruise speed [m/s] that times the path (core/trajectory.py); no
             stage of the planner reads it.
+        commit_s: Trajectory ahead of the vehicle a replan in flight keeps [s]; no
+            stage of the planner reads it.
         entry_candidates: K nodes tried as entry and as exit (Case 1).
         candidates: How 'improved' picks them: 'spread' (Fig. 11) or 'nearest'.
         network: 'box' (threats and the box surface) or 'threats' (the paper's).
@@ -65,6 +67,7 @@ class PlannerConfig:
     min_turn_radius_m: float = _D['min_turn_radius_m']
     min_altitude_m: float = _D['min_altitude_m']
     speed_mps: float = _D['speed_mps']
+    commit_s: float = _D['commit_s']
     entry_candidates: int = _D['entry_candidates']
     candidates: str = _D['candidates']
     network: str = _D['network']
