@@ -9,7 +9,7 @@ Layout (as in the bundled ``test/data/*.yaml``)::
     start: [x, y, z]
     goal: [x, y, z]
     threats:
-      - {position: [x, y, z], intensity: F}   # optional lethal_radius: r
+      - {position: [x, y, z], intensity: F}   # optional lethal_radius: r, velocity
 
 and optionally ``no_fly_zones`` and ``terrain`` (see :mod:`threat_planner.core.world.airspace`).
 Big threat pictures may instead name a compact file next to the YAML, ``threats_file:
@@ -23,12 +23,17 @@ position of the file is given in WGS84 (:mod:`threat_planner.core.inputs.geodeti
 ``terrain: {dem: FILE.tif}`` reads a GeoTIFF DEM (:mod:`threat_planner.core.geo.dem`).
 ``speed: V`` [m/s] is the cruise speed the plan is flown at (the setting ``speed_mps``,
 which a command line's ``--speed`` overrides); it times the path and changes no plan.
+A threat's ``velocity: [vx, vy, vz]`` [m/s] (finite, at most MAX_THREAT_SPEED; East,
+North, Up in a geodetic file) moves it in straight lines from t = 0 for a plan in time
+or a flight (:mod:`threat_planner.core.flight`); a static plan uses the positions as given.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 import difflib
+import math
+import numbers
 from pathlib import Path
 from typing import Optional
 import warnings
@@ -61,6 +66,8 @@ class Scenario:
         datum: WGS84 origin of the frame (East-North-Up), or None.
         speed: Cruise speed [m/s] the file gives (key ``speed``), or None for the
             setting's.
+        velocities: Each threat's velocity (N, 3) [m/s] (key ``velocity``); zeros where a
+            threat has none (None in the constructor: all still).
     """
 
     name: str
@@ -73,6 +80,17 @@ class Scenario:
     airspace: Airspace = field(default_factory=Airspace)
     datum: Optional[Datum] = None
     speed: Optional[float] = None
+    velocities: Optional[np.ndarray] = None
+
+    def __post_init__(self) -> None:
+        """Hold the velocities as an (N, 3) float array, zeros for None."""
+        n = len(self.threats)
+        vel = np.zeros((n, 3)) if self.velocities is None else np.array(
+            self.velocities, dtype=float)
+        if vel.shape != (n, 3) and not (n == 0 and vel.size == 0):
+            raise InputError(f'threats.velocity: expected {n} rows [vx, vy, vz], got shape '
+                             f'{list(vel.shape)}')
+        object.__setattr__(self, 'velocities', vel.reshape(n, 3))
 
     def to_dict(self) -> dict:
         """Return the scenario in the YAML file layout (local coordinates)."""
@@ -85,6 +103,9 @@ class Scenario:
                         for p, f in zip(self.threats.positions, self.threats.intensities)],
             **({} if self.speed is None else {'speed': self.speed}),
         }
+        for t, v in zip(out['threats'], self.velocities):
+            if np.any(v != 0):
+                t['velocity'] = v.tolist()
         if self.airspace:
             lethal = self.airspace.lethal_radii(len(self.threats))
             for t, r in zip(out['threats'], lethal):
@@ -101,7 +122,9 @@ TOP_KEYS = ('name', 'frame_id', 'description', 'bounds', 'start', 'goal', 'threa
 #: Suffixes a ``threats_file`` may have.
 THREATS_FILE_SUFFIXES = ('.npy', '.csv')
 BOUNDS_KEYS = ('min', 'max')
-THREAT_KEYS = ('position', 'intensity', 'lethal_radius')
+THREAT_KEYS = ('position', 'intensity', 'lethal_radius', 'velocity')
+#: Fastest threat a scenario may give [m/s] (the cruise speed's upper bound).
+MAX_THREAT_SPEED = 1000.0
 
 
 def _check_keys(mapping: dict, known: tuple, where: str, fail) -> None:
@@ -128,6 +151,23 @@ def _speed(data: dict) -> Optional[float]:
         rule, got = str(exc).split(': ', 1)[1].rsplit(', got ', 1)
         raise InputError(f'speed: {rule} [m/s], got {got}') from None
     return float(value)
+
+
+def _velocity(i: int, value: object) -> list[float]:
+    """Return threat `i`'s ``velocity`` [m/s], checked: three finite numbers, not too fast."""
+    name = f'threats[{i}].velocity'
+    if (not isinstance(value, (list, tuple)) or len(value) != 3
+            or any(isinstance(v, bool) or not isinstance(v, numbers.Real) for v in value)):
+        raise InputError(f'{name}: expected [vx, vy, vz] [m/s], got {value!r}')
+    v = [float(x) for x in value]
+    shown = '[' + ', '.join(f'{x:g}' for x in v) + ']'
+    if not all(math.isfinite(x) for x in v):
+        raise InputError(f'{name}: must be finite, got {shown}')
+    speed = math.sqrt(sum(x * x for x in v))
+    if speed > MAX_THREAT_SPEED:
+        raise InputError(f'{name}: speed must be <= {MAX_THREAT_SPEED:g} [m/s], got {shown} '
+                         f'(speed {speed:g})')
+    return v
 
 
 def _is_header(line: str) -> bool:
@@ -189,9 +229,10 @@ def read_threats_file(name: object, base: Path | None) -> np.ndarray:
 
 
 def _threat_rows(data: dict, base: Path | None, fail) -> tuple:
-    """Positions, intensities and lethal radii from ``threats`` or ``threats_file``.
+    """Positions, intensities, lethal radii and velocities (``threats``/``threats_file``).
 
-    The file gives arrays (already (N, 3) and (N,)); the YAML list gives lists.
+    The file gives arrays (already (N, 3) and (N,)) and no velocities (None); the YAML
+    list gives lists, the velocities checked ((N, 3), zeros where a threat has none).
     """
     if 'threats_file' in data:
         if data.get('threats'):
@@ -200,11 +241,11 @@ def _threat_rows(data: dict, base: Path | None, fail) -> tuple:
             rows = read_threats_file(data['threats_file'], base)
         except InputError as exc:
             raise fail(str(exc)) from None
-        return rows[:, :3], rows[:, 3], [float('nan')] * len(rows)
+        return rows[:, :3], rows[:, 3], [float('nan')] * len(rows), None
     threats = data['threats'] if data['threats'] is not None else []
     if not isinstance(threats, list):
         raise fail('field "threats" must be a list')
-    positions, intensities, lethal = [], [], []
+    positions, intensities, lethal, velocities = [], [], [], []
     for i, t in enumerate(threats):
         if not isinstance(t, dict) or 'position' not in t or 'intensity' not in t:
             raise fail(f'threats[{i}] needs "position" and "intensity"')
@@ -212,7 +253,11 @@ def _threat_rows(data: dict, base: Path | None, fail) -> tuple:
         positions.append(t['position'])
         intensities.append(t['intensity'])
         lethal.append(t.get('lethal_radius', float('nan')))
-    return positions, intensities, lethal
+        try:
+            velocities.append(_velocity(i, t['velocity']) if 'velocity' in t else [0.0] * 3)
+        except InputError as exc:
+            raise fail(str(exc)) from None
+    return positions, intensities, lethal, velocities
 
 
 def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
@@ -244,7 +289,7 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
         raise fail('field "bounds" needs "min" and "max"')
     _check_keys(bounds, BOUNDS_KEYS, 'bounds.', fail)
     base = None if source.startswith('<') else Path(source).parent
-    positions, intensities, lethal = _threat_rows(data, base, fail)
+    positions, intensities, lethal, velocities = _threat_rows(data, base, fail)
     try:
         datum, geodetic = frame_of(data)
         xyz = '[lat, lon, h]' if geodetic else '[x, y, z]'
@@ -279,7 +324,7 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
         raise fail(f'bad value ({exc})') from None
     return Scenario(str(data.get('name', Path(source).stem)), str(data.get('frame_id', 'map')),
                     str(data.get('description', '') or ''), box, start, goal, threat_field,
-                    airspace, datum, speed)
+                    airspace, datum, speed, velocities)
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -330,6 +375,8 @@ def save_scenario(scenario: Scenario, path: str | Path, threats_file: str | None
                              f'{" or ".join(THREATS_FILE_SUFFIXES)}')
         if any('lethal_radius' in t for t in doc['threats']):
             raise InputError('threats_file: lethal radii need the threats list')
+        if any('velocity' in t for t in doc['threats']):
+            raise InputError('threats_file: threat velocities need the threats list')
         rows = np.column_stack([scenario.threats.positions, scenario.threats.intensities])
         table = path.parent / threats_file
         if suffix == '.npy':
