@@ -16,6 +16,8 @@ ROS_FREE = [
     'threat_planner.core.planner',
     'threat_planner.core.inputs.scenario',
     'threat_planner.core.geo.dem',
+    'threat_planner.core.flight.commit',
+    'threat_planner.flight.fly',
     'threat_planner.export.thin',
     'threat_planner.export.qgc',
     'threat_planner.cli',

@@ -5,7 +5,7 @@ vehicle (:mod:`.vehicle`) every ``dt`` along the plan. When an event (:mod:`.eve
 due, the planner learns it then (threats keep their announced velocity; it knows nothing
 of later events), keeps the next ``commit_s`` of the path it flies unchanged, and replans
 from the end of that stretch at the time the vehicle will be there
-(:func:`threat_planner.core.flight.replan.plan_in_time`, the planning the node does).
+(:mod:`threat_planner.core.flight.commit`, the replan step the node takes).
 A replan that fails (a start inside a new zone, no route) keeps the last good plan and
 says so. The flown path is scored with the exact timed J against the true threats; so is
 the plan made with hindsight (every event known at t = 0, to the final goal).
@@ -20,6 +20,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from threat_planner.core.cost.closed_form import Cost
+from threat_planner.core.flight.commit import commit, replan_in_flight
+from threat_planner.core.flight.reference import ReferencePath
 from threat_planner.core.flight.replan import plan_in_time, TimedPlan
 from threat_planner.core.flight.timed_cost import timed_path_cost
 from threat_planner.core.flight.timeline import ThreatTimeline
@@ -28,7 +30,7 @@ from threat_planner.core.optimise.limits import check_limits, FlightLimits
 from threat_planner.core.world.airspace import Zone
 from threat_planner.errors import InputError, PlanningError, ThreatPlannerError
 from threat_planner.flight.events import apply_event, Event
-from threat_planner.flight.vehicle import PointMass, ReferencePath
+from threat_planner.flight.vehicle import PointMass
 
 __all__ = ['FlightReport', 'fly', 'scenario_timeline']
 
@@ -98,7 +100,7 @@ class _Flight:
         self.goal = np.asarray(scenario.goal, float)
         self.replans: list[dict] = []
         self.max_jump = 0.0
-        first = self._plan(np.asarray(scenario.start, float), 0.0, None, None, heading)
+        first = self._plan(np.asarray(scenario.start, float), heading)
         if first is None:
             raise PlanningError(self.replans[-1]['reason'])
         self.last = first
@@ -109,50 +111,59 @@ class _Flight:
                                  config.min_turn_radius_m, config.max_climb_deg,
                                  config.max_dive_deg)
 
-    def _plan(self, start: NDArray, t0: float, guess: NDArray | None, reason: str | None,
-              heading: NDArray | None) -> TimedPlan | None:
+    def _plan(self, start: NDArray, heading: NDArray | None) -> TimedPlan | None:
+        """Make the first plan, from the start at t = 0."""
         try:
             p = plan_in_time(self.known, start, self.goal, self.sc.box, self.cfg, self.speed,
-                             t0, zones=tuple(self.zones), terrain=self.terrain, guess=guess,
+                             0.0, zones=tuple(self.zones), terrain=self.terrain,
                              heading=heading)
         except ThreatPlannerError as exc:
-            self.replans.append({'t': t0, 'latency_ms': None, 'reason': reason or 'start',
-                                 'ok': False, 'error': str(exc)})
+            self._failed(0.0, 'start', exc)
             return None
-        self.replans.append({'t': t0, 'latency_ms': round(p.latency_ms, 3),
-                             'reason': reason or 'start', 'ok': True, 'rounds': p.rounds,
+        self._planned(0.0, 'start', p)
+        return p
+
+    def _failed(self, t: float, reason: str, exc: ThreatPlannerError) -> None:
+        self.replans.append({'t': t, 'latency_ms': None, 'reason': reason, 'ok': False,
+                             'error': str(exc)})
+
+    def _planned(self, t: float, reason: str, p: TimedPlan) -> None:
+        self.replans.append({'t': t, 'latency_ms': round(p.latency_ms, 3),
+                             'reason': reason, 'ok': True, 'rounds': p.rounds,
                              'J_planned': p.cost.J, 'warm': bool(p.result.warm)})
         if p.entry is not None:
             self.replans[-1].update(entry_turn_deg=round(p.entry.turn_deg, 3),
                                     entry_feasible=p.entry.feasible)
-        return p
 
     def replan(self, t: float, reason: str) -> None:
-        """Keep commit_s of the current path and replan from its end (module docstring)."""
-        s_c = min(self.s_now + self.speed * self.commit_s, self.ref.length)
-        c = self.ref.at(s_c)
-        if np.linalg.norm(c - self.goal) < 1e-6:
+        """Keep commit_s of the current path and replan from its end (module docstring).
+
+        The step the node takes too: :func:`threat_planner.core.flight.commit.commit`,
+        then :func:`~threat_planner.core.flight.commit.replan_in_flight`. A failed replan
+        is reported at the time of the commit point (the replan's t0).
+        """
+        kept = commit(self.ref, self.s_now, t, self.goal, self.speed, self.commit_s)
+        if kept.arriving:
             self.replans.append({'t': t, 'latency_ms': 0.0, 'reason': reason, 'ok': True,
                                  'note': 'arriving: nothing left to replan'})
             return
-        guess = None if s_c >= self.ref.length else self.ref.piece(s_c, self.ref.length)
-        if guess is not None and np.linalg.norm(guess[-1] - self.goal) > 1e-9:
-            guess = None    # the goal moved: start from the straight line
-        new = self._plan(c, t + (s_c - self.s_now) / self.speed, guess, reason,
-                         self.ref.tangent(s_c))
-        if new is None:
+        try:
+            flight = replan_in_flight(self.known, kept, self.sc.box, self.cfg,
+                                      zones=tuple(self.zones), terrain=self.terrain)
+        except ThreatPlannerError as exc:
+            self._failed(kept.t_end, reason, exc)
             return
-        self.replans[-1]['t'] = t
-        committed = self.ref.piece(self.s_now, s_c)
+        new = flight.plan
+        self._planned(t, reason, new)
         old = self.ref
-        self.ref = ReferencePath(np.vstack([committed[:-1], new.points]))
+        self.ref = ReferencePath(flight.points)
         self.last = new
         # The commanded path must not move under the vehicle: compare the committed
         # stretch before and after, and the joint.
-        ds = np.linspace(0.0, s_c - self.s_now, 21)
+        ds = np.linspace(0.0, kept.s_end - self.s_now, 21)
         jump = np.linalg.norm(self.ref.at(ds) - old.at(self.s_now + ds), axis=1).max()
         self.max_jump = max(self.max_jump, float(jump),
-                            float(np.linalg.norm(new.points[0] - c)))
+                            float(np.linalg.norm(new.points[0] - kept.end)))
         self.s_now = 0.0
 
     def step(self) -> float:
