@@ -1,4 +1,4 @@
-"""Command line: ``threat-planner plan | paper | replay | batch | bag`` (and ``--version``).
+"""Command line: ``threat-planner plan | fly | paper | replay | batch | bag`` (and ``--version``).
 
 Errors in the user's input (a bad scenario file, a bad option value) exit with status 2 and
 one line on stderr, never a traceback.
@@ -19,6 +19,8 @@ from threat_planner.cli.bag import add_bag_commands
 from threat_planner.cli.batch import (add_batch_command, add_robust_options, robust_plan,
                                       robust_summary)
 from threat_planner.cli.exports import add_export_options, check_exports, export_plan
+from threat_planner.cli.fly import (add_fly_command, add_start_heading, enter_plan,
+                                    refuse_heading_with, start_heading)
 from threat_planner.cli.options import (add_planner_options, config_from, output_file,
                                         overrides, ProgressBar)
 from threat_planner.core.inputs.scenario import load_scenario
@@ -37,6 +39,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     cfg = config_from(args, scenario)
     check_exports(args, scenario)
+    heading = start_heading(args)
+    if heading is not None:
+        refuse_heading_with(args)
     progress = ProgressBar('sweep')
     if args.robust is not None:
         result = robust_plan(scenario, cfg, args, progress)
@@ -47,6 +52,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         result = plan(scenario.threats, scenario.start, scenario.goal, scenario.box, cfg,
                       progress=progress, airspace=scenario.airspace or None)
     progress.close()
+    headed = None if heading is None else enter_plan(heading, scenario, cfg, result)
+    if headed is not None:
+        result = headed.result
     c0, c = result.initial_cost, result.cost
     stages = ', '.join(f'{k[:-3]} {v:.1f}' for k, v in result.timings_ms.items()
                        if k != 'total_ms')
@@ -58,6 +66,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     print(f'  final:   J={c.J:.3f} J_L={c.J_L:.3f} J_R={c.J_R:.3f} {k}'
           f'feasible={result.feasible} (pitch {result.angles.max_pitch_deg:.1f} deg, '
           f'turn {result.angles.max_turn_deg:.1f} deg)')
+    if headed is not None:
+        print(headed.line)
     if result.clearance is not None:
         print(f'  clearance: zones {result.clearance.zones_m:.3f} m, terrain '
               f'{result.clearance.terrain_m:.3f} m above the floor')
@@ -72,7 +82,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         print(f'  recorded: {recording}')
     summary = result.summary() if args.json else None
     if summary is not None:
-        summary.update(robust)
+        summary.update(robust, **({} if headed is None else headed.fields))
     for line in export_plan(args, scenario, result, cfg, summary):
         print(line)
     if args.json:
@@ -163,7 +173,9 @@ def build_parser() -> argparse.ArgumentParser:
                              'outputs); the plan is made from the float32 threats')
     add_export_options(p_plan)
     add_robust_options(p_plan)
+    add_start_heading(p_plan)
     p_plan.set_defaults(func=_cmd_plan)
+    add_fly_command(sub, planner_options)
 
     p_paper = sub.add_parser('paper', help="reproduce the paper's Section IV on a scenario")
     planner_options(p_paper)

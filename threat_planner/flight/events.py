@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 from pathlib import Path
+import re
 
 import numpy as np
 import yaml
@@ -66,7 +67,13 @@ def _vector(name: str, value: object) -> list[float]:
     return out
 
 
+#: A number YAML 1.1 (PyYAML) leaves a string: an exponent without a sign, ``2.0e5``.
+_YAML12_FLOAT = re.compile(r'[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][0-9]+')
+
+
 def _number(name: str, value: object, positive: bool = False) -> float:
+    if isinstance(value, str) and _YAML12_FLOAT.fullmatch(value.strip()):
+        value = float(value)    # as a scenario's intensity reads it
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(f'{name}: expected a number, got {value!r}')
     v = float(value)
@@ -183,16 +190,16 @@ def apply_event(event: Event, timeline: ThreatTimeline, zones: list[Zone]) -> np
     if event.kind == 'add_threat':
         timeline.add(event.t, v['position'], v['intensity'], v.get('velocity', (0, 0, 0)),
                      v.get('lethal_radius', np.nan))
-    elif event.kind == 'move_threat':
+    elif event.kind in ('move_threat', 'remove_threat'):
         try:
-            timeline.move(event.t, v['index'], v.get('position'), v.get('velocity'))
+            if event.kind == 'move_threat':
+                timeline.move(event.t, v['index'], v.get('position'), v.get('velocity'))
+            else:
+                timeline.remove(event.t, v['index'])
         except InputError as exc:
-            raise InputError(f'{event.label}: {exc}') from None
-    elif event.kind == 'remove_threat':
-        try:
-            timeline.remove(event.t, v['index'])
-        except InputError as exc:
-            raise InputError(f'{event.label}: {exc}') from None
+            # The timeline names 'move_threat.index': the file's field is this event's.
+            text = str(exc).removeprefix(f'{event.kind}.')
+            raise InputError(f'{event.label}.{text}') from None
     elif event.kind == 'add_zone':
         zones.append(v['zone'])
     else:
