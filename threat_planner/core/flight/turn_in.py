@@ -1,0 +1,144 @@
+"""A turn-in that is flyable by construction: a pursuit of the plan within the limits.
+
+From the start ``s`` along the heading ``h``, a point moves in steps of ``STEP`` turn
+radii, turning toward a point ``LOOK`` turn radii ahead on the plan at most as tightly as
+the radius allows (with a margin, so that the polyline of its positions passes the fillet
+rule of :mod:`threat_planner.core.optimise.limits`) and with its flight-path angle held
+within the climb and dive limits. Once it flies along the plan (within ``ON_PATH`` turn
+radii of it, and its direction within ``ALIGNED_DEG``), the plan's own vertices take
+over; where the joint breaks a limit, a later joint is tried, and failing all of them the
+pursuit goes on to the goal. :func:`pursue_plan` returns the joined path; the entry
+(:mod:`.entry`) starts its optimisation from it and keeps it when the optimisation does
+not end within the limits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from threat_planner.core.optimise.limits import check_limits, FlightLimits
+
+__all__ = ['pursue_plan']
+
+#: Step of the pursuit, in turn radii: a chord of 0.25 R turns the fillet radius of the
+#: pursued arc down by 0.5 %, within MARGIN.
+STEP = 0.25
+#: The pursuit turns at MARGIN times the turn radius.
+MARGIN = 1.02
+#: Look-ahead of the pursuit, in turn radii.
+LOOK = 1.0
+#: The pursuit is on the plan within this many turn radii of it...
+ON_PATH = 0.02
+#: ...flying within this angle of its direction [deg].
+ALIGNED_DEG = 1.0
+#: Joints tried after the pursuit is on the plan, one plan vertex apart.
+JOINTS = 6
+
+
+def _unit(v: NDArray) -> NDArray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0 else v
+
+
+def _turn_toward(v: NDArray, d: NDArray, most: float) -> NDArray:
+    """Rotate unit `v` toward unit `d` by at most `most` [rad], in their plane."""
+    c = float(np.clip(v @ d, -1.0, 1.0))
+    angle = math.acos(c)
+    if angle <= most:
+        return d
+    side = d - c * v
+    if float(np.linalg.norm(side)) < 1e-12:    # straight back: turn level, either way
+        side = np.cross([0.0, 0.0, 1.0], v)
+        if float(np.linalg.norm(side)) < 1e-12:
+            side = np.array([1.0, 0.0, 0.0])
+    side = _unit(side)
+    return math.cos(most) * v + math.sin(most) * side
+
+
+def _hold_pitch(v: NDArray, climb_deg: float, dive_deg: float) -> NDArray:
+    h = math.hypot(v[0], v[1])
+    pitch = math.degrees(math.atan2(v[2], h))
+    lo, hi = -min(dive_deg, 89.0), min(climb_deg, 89.0)
+    if lo <= pitch <= hi:
+        return v
+    p = math.radians(min(max(pitch, lo), hi))
+    horiz = v[:2] / h if h > 1e-12 else np.array([1.0, 0.0])
+    return np.array([math.cos(p) * horiz[0], math.cos(p) * horiz[1], math.sin(p)])
+
+
+def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: float
+                ) -> tuple[NDArray, bool]:
+    """Return the plan `points` entered along `heading` by a pursuit (module docstring).
+
+    Parameters
+    ----------
+    points : NDArray
+        The plan (M, 3) [m]; ``points[0]`` is the start.
+    heading : NDArray
+        Unit direction at the start.
+    limits : FlightLimits
+        The turn radius, climb and dive the pursuit keeps.
+    floor_z : float
+        z of the box floor [m], for the altitude limit of the check.
+
+    Returns
+    -------
+    tuple of (NDArray, bool)
+        The path, its first segment along `heading`, and whether it meets the limits.
+
+    """
+    pts = np.asarray(points, float)
+    radius = max(limits.min_turn_radius_m, 1e-3 * float(np.linalg.norm(pts[-1] - pts[0])))
+    step = STEP * radius
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    length = float(arc[-1])
+    dense_s = np.linspace(0.0, length, max(int(length / (0.1 * step)) + 2, 3))
+    dense = np.stack([np.interp(dense_s, arc, pts[:, c]) for c in range(3)], axis=1)
+    last_dir = _unit(pts[-1] - pts[-2])
+    climb = limits.max_climb_deg if limits.climb_on else 90.0
+    dive = limits.max_dive_deg if limits.dive_on else 90.0
+    most = step / (MARGIN * radius)
+    p, v = pts[0].copy(), _unit(np.asarray(heading, float))
+    trail, i = [p.copy()], 0
+    window = int(4 * step / max(dense_s[1], 1e-12)) + 2
+    cos_aligned = math.cos(math.radians(ALIGNED_DEG))
+    for _ in range(int(4 * (length + 2 * math.pi * radius) / step) + 10):
+        near = dense[i:i + window]
+        i += int(np.argmin(np.linalg.norm(near - p, axis=1)))
+        s_here = dense_s[i]
+        s_aim = s_here + LOOK * radius
+        aim = (np.array([np.interp(s_aim, arc, pts[:, c]) for c in range(3)])
+               if s_aim <= length else pts[-1] + (s_aim - length) * last_dir)
+        tangent = _unit(dense[min(i + 1, len(dense) - 1)] - dense[max(i - 1, 0)])
+        if (len(trail) > 1 and float(np.linalg.norm(p - dense[i])) <= ON_PATH * radius
+                and float(v @ tangent) >= cos_aligned and s_here < length - step):
+            joined = _join(trail, pts, arc, s_here, limits, floor_z)
+            if joined is not None:
+                return joined, True
+        if float(np.linalg.norm(pts[-1] - p)) <= step:
+            break
+        if len(trail) > 1:     # the first step goes along the heading
+            v = _hold_pitch(_turn_toward(v, _unit(aim - p), most), climb, dive)
+        p = p + step * v
+        trail.append(p.copy())
+    path = np.vstack(trail + [pts[-1]])
+    return path, check_limits(path, limits, floor_z).feasible
+
+
+def _join(trail: list[NDArray], pts: NDArray, arc: NDArray, s_here: float,
+          limits: FlightLimits, floor_z: float) -> NDArray | None:
+    """Return the trail joined to the plan's vertices, the first joint within the limits."""
+    first = int(np.searchsorted(arc, s_here, side='right'))
+    for j in range(first, min(first + JOINTS, len(pts))):
+        # The joint segment at least as long as the one after the plan vertex, so the
+        # vertex keeps the share it had in the plan.
+        if j + 1 < len(pts) and arc[j] - s_here < arc[j + 1] - arc[j]:
+            continue
+        path = np.vstack(trail + [pts[j:]])
+        if check_limits(path, limits, floor_z).feasible:
+            return path
+    return None
