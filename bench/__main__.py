@@ -34,6 +34,8 @@ SUITES: dict[str, tuple[str, str, str]] = {
                'kill -9 the node while it plans and records, SIGINT a long plan'),
     'flood': ('bench.suites.flood', 'main',
               'flood the node with threat updates: coalesced, responsive, no backlog'),
+    'flights': ('bench.suites.flights', 'main',
+                'fresh simulated flights: pop-ups, moving threats, latency, J against hindsight'),
     'fresh': ('bench.suites.fresh', 'main',
               'new random fields every run: HEAD beside a baseline tag and the yardsticks'),
     'getplan_latency': ('bench.suites.getplan_latency', 'main',

@@ -125,14 +125,18 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
         return Entry(guess, len(guess) - 1 - _tail_vertices(guess, pts), True,
                      math.degrees(turn))
     # SLSQP can stop on a failed line search short of feasible: go on from where it
-    # stopped, then from a wider turn-in with twice the free vertices, and keep the first
-    # feasible path, else the least violating one.
-    best, best_excess, changed = pts, math.inf, 0
+    # stopped; keep the first feasible path, else the least violating one, the
+    # pursuit's included.
+    best, best_excess = guess, _relative_excess(
+        check_limits(guess, limits, floor).violations, limits)
+    changed = len(guess) - 1 - _tail_vertices(guess, pts)
     pitch = math.degrees(math.asin(float(np.clip(h[2], -1.0, 1.0))))
     hopeless = ((limits.climb_on and pitch > limits.max_climb_deg)
                 or (limits.dive_on and -pitch > limits.max_dive_deg))
-    tries = ((ENTRY_POINTS, 1.2, 0),) if hopeless else (
-        (ENTRY_POINTS, 1.2, 1), (2 * ENTRY_POINTS, 1.6, 1))
+    # One SLSQP run, with one restart unless the heading itself breaks a limit: it is
+    # the fallback, and each run takes 0.1-5 s (a wider second window took 10.6 s on a
+    # bench flight under load and still broke the turn radius).
+    tries = ((ENTRY_POINTS, 1.2, 0 if hopeless else 1),)
     for count, radius, restarts in tries:
         k = min(count, len(pts) - 3)
         x = None

@@ -6,8 +6,9 @@ the radius allows (with a margin, so that the polyline of its positions passes t
 rule of :mod:`threat_planner.core.optimise.limits`) and with its flight-path angle held
 within the climb and dive limits. Once it flies along the plan (within ``ON_PATH`` turn
 radii of it, and its direction within ``ALIGNED_DEG``), the plan's own vertices take
-over; where the joint breaks a limit, a later joint is tried, and failing all of them the
-pursuit goes on to the goal. :func:`pursue_plan` returns the joined path; the entry
+over at the first joint whose path keeps every limit; failing all of them the
+pursuit goes on, through the goal where the last step into it keeps the limits (else it
+turns round and comes back). :func:`pursue_plan` returns the joined path; the entry
 (:mod:`.entry`) starts its optimisation from it and keeps it when the optimisation does
 not end within the limits.
 """
@@ -30,10 +31,13 @@ STEP = 0.25
 MARGIN = 1.02
 #: Look-ahead of the pursuit, in turn radii.
 LOOK = 1.0
-#: The pursuit is on the plan within this many turn radii of it...
-ON_PATH = 0.02
-#: ...flying within this angle of its direction [deg].
-ALIGNED_DEG = 1.0
+#: Look-aheads of its height tried in turn, in turn radii.
+LOOK_Z = (1.0, 3.0, 6.0)
+#: Joints are tried once the pursuit is within this many turn radii of the plan...
+ON_PATH = 0.5
+#: ...flying within this angle of its direction [deg] (the check of the joined path
+#: decides; a pursuit that lags a climb at the climb limit never closes in fully).
+ALIGNED_DEG = 30.0
 #: Joints tried after the pursuit is on the plan, one plan vertex apart.
 JOINTS = 6
 
@@ -73,6 +77,10 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
                 ) -> tuple[NDArray, bool]:
     """Return the plan `points` entered along `heading` by a pursuit (module docstring).
 
+    A pursuit that cannot close in on a plan climbing or diving at the limit (it lags
+    below or above it for good) is flown again aiming its height further ahead
+    (``LOOK_Z``), and the first one that joins within the limits is kept.
+
     Parameters
     ----------
     points : NDArray
@@ -90,6 +98,17 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
         The path, its first segment along `heading`, and whether it meets the limits.
 
     """
+    path = None
+    for look_z in LOOK_Z:
+        path, ok = _pursue(points, heading, limits, floor_z, look_z)
+        if ok:
+            return path, True
+    return path, False
+
+
+def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: float,
+            look_z: float) -> tuple[NDArray, bool]:
+    """Fly one pursuit, aiming in height `look_z` turn radii ahead."""
     pts = np.asarray(points, float)
     radius = max(limits.min_turn_radius_m, 1e-3 * float(np.linalg.norm(pts[-1] - pts[0])))
     step = STEP * radius
@@ -110,23 +129,31 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
         near = dense[i:i + window]
         i += int(np.argmin(np.linalg.norm(near - p, axis=1)))
         s_here = dense_s[i]
-        s_aim = s_here + LOOK * radius
-        aim = (np.array([np.interp(s_aim, arc, pts[:, c]) for c in range(3)])
-               if s_aim <= length else pts[-1] + (s_aim - length) * last_dir)
+        aim = _along(pts, arc, last_dir, s_here + LOOK * radius)
+        aim[2] = _along(pts, arc, last_dir, s_here + look_z * radius)[2]
         tangent = _unit(dense[min(i + 1, len(dense) - 1)] - dense[max(i - 1, 0)])
         if (len(trail) > 1 and float(np.linalg.norm(p - dense[i])) <= ON_PATH * radius
                 and float(v @ tangent) >= cos_aligned and s_here < length - step):
             joined = _join(trail, pts, arc, s_here, limits, floor_z)
             if joined is not None:
                 return joined, True
-        if float(np.linalg.norm(pts[-1] - p)) <= step:
-            break
+        if len(trail) > 1 and float(np.linalg.norm(pts[-1] - p)) <= 2 * step:
+            path = np.vstack(trail + [pts[-1]])   # at the goal: ends here if it may
+            if check_limits(path, limits, floor_z).feasible:
+                return path, True
         if len(trail) > 1:     # the first step goes along the heading
             v = _hold_pitch(_turn_toward(v, _unit(aim - p), most), climb, dive)
         p = p + step * v
         trail.append(p.copy())
     path = np.vstack(trail + [pts[-1]])
     return path, check_limits(path, limits, floor_z).feasible
+
+
+def _along(pts: NDArray, arc: NDArray, last_dir: NDArray, s: float) -> NDArray:
+    """Return the point at arc length `s` of the plan, past its end along the last segment."""
+    if s <= arc[-1]:
+        return np.array([np.interp(s, arc, pts[:, c]) for c in range(3)])
+    return pts[-1] + (s - arc[-1]) * last_dir
 
 
 def _join(trail: list[NDArray], pts: NDArray, arc: NDArray, s_here: float,
