@@ -5,7 +5,9 @@ along the heading ``h`` (no turn at the start, which the fillet rule of
 :mod:`threat_planner.core.optimise.limits` does not check), the turns after it within
 the limits. :func:`enter` makes a plan so. It pursues the plan from the start within the
 limits (:mod:`.turn_in`: flyable by construction) until it flies along it, then joins the
-plan's own vertices. Where no pursuit joins within the limits, SLSQP moves the plan's
+plan's own vertices. Where the plan cannot be joined (it climbs at the limit above the
+pursuit, say) and a ``replan`` is given, the picture is planned again from where the
+pursuit had turned and that plan pursued. Failing that, SLSQP moves the plan's
 first ENTRY_POINTS vertices instead (``start + l h`` first, l > 0 free) to the least J of
 the static picture under the limits' smooth constraints. Where the plan already leaves
 along the heading it is returned as it is.
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from typing import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -25,7 +28,7 @@ from threat_planner.core.optimise.limits import (check_limits, constraint_jacobi
 from threat_planner.core.optimise.optimisation import aim
 from threat_planner.core.flight.turn_in import pursue_plan
 from threat_planner.core.world.threats import Box, ThreatField
-from threat_planner.errors import InputError
+from threat_planner.errors import InputError, ThreatPlannerError
 
 __all__ = ['ENTRY_POINTS', 'Entry', 'enter', 'unit_heading']
 
@@ -82,7 +85,8 @@ def unit_heading(value: ArrayLike, name: str = 'start_heading') -> NDArray:
 
 
 def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box | None,
-          w: float, limits: FlightLimits) -> Entry:
+          w: float, limits: FlightLimits,
+          replan: Callable[[NDArray], NDArray] | None = None) -> Entry:
     """Return the plan `points` made to leave its start along `heading` (module docstring).
 
     Parameters
@@ -99,6 +103,9 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
         Threat weight.
     limits : FlightLimits
         The limits every turn and segment must meet.
+    replan : callable, optional
+        ``replan(point)`` plans the same picture from `point` to the goal, (K, 3) [m];
+        used where the pursuit cannot join the plan (module docstring).
 
     Returns
     -------
@@ -120,13 +127,25 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
     # A pursuit of the plan within the limits is flyable by construction (.turn_in).
     # SLSQP from it never ended lower within the limits (18 headings on a 20-threat
     # field: 0 of 18, at 30-900 ms each against 1-3 ms for the pursuit), so it is kept.
-    guess, ok = pursue_plan(pts, h, limits, floor)
-    if ok:
-        return Entry(guess, len(guess) - 1 - _tail_vertices(guess, pts), True,
+    got = pursue_plan(pts, h, limits, floor)
+    if got.feasible:
+        return Entry(got.path, len(got.path) - 1 - _tail_vertices(got.path, pts), True,
                      math.degrees(turn))
-    # SLSQP can stop on a failed line search short of feasible: go on from where it
-    # stopped; keep the first feasible path, else the least violating one, the
-    # pursuit's included.
+    guess = got.path
+    if replan is not None and got.turned is not None:
+        # The plan cannot be joined (it climbs at the limit above the pursuit, say): plan
+        # again from where the pursuit had turned, and pursue that plan from there.
+        try:
+            again = replan(got.turned[-1])
+        except ThreatPlannerError:
+            again = None
+        if again is not None:
+            rest = pursue_plan(again, got.turned_heading, limits, floor)
+            # Without the joint vertex: the two steps either side of it are collinear,
+            # and as one segment the turn after it keeps the share it had in `rest`.
+            joined = np.vstack([got.turned[:-1], rest.path[1:]])
+            if check_limits(joined, limits, floor).feasible:
+                return Entry(joined, len(joined) - 1, True, math.degrees(turn))
     best, best_excess = guess, _relative_excess(
         check_limits(guess, limits, floor).violations, limits)
     changed = len(guess) - 1 - _tail_vertices(guess, pts)

@@ -186,15 +186,19 @@ def plan_in_time(known: ThreatTimeline, start: ArrayLike, goal: ArrayLike, box: 
         cost = timed_path_cost(pts, times, known, config.w)
         if best is None or cost.J < best.cost.J:
             best = TimedPlan(pts, times, cost, result, 0, 0.0)
-            best_field = field_
+            best_field, best_lethal = field_, lethal
         path = pts
         warm_start = result
     if heading is not None:
         # Onto the heading once, for the round kept: a turn-in changes only the first
         # vertices, and each one costs an SLSQP (tens of milliseconds).
+        def again(point: NDArray) -> NDArray:
+            return _plan_static(best_field, point, g, box, config, zones, best_lethal,
+                                terrain, None).path
+
         entered = enter(best.points, heading, best_field,
                         box if config.confine_to_box else None, config.w,
-                        FlightLimits.of(config))
+                        FlightLimits.of(config), replan=again)
         best.points, best.entry = entered.points, entered
         best.times = _times(best.points, speed, t0)
         best.cost = timed_path_cost(best.points, best.times, known, config.w)

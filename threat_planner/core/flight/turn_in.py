@@ -4,7 +4,8 @@ From the start ``s`` along the heading ``h``, a point moves in steps of ``STEP``
 radii, turning toward a point ``LOOK`` turn radii ahead on the plan at most as tightly as
 the radius allows (with a margin, so that the polyline of its positions passes the fillet
 rule of :mod:`threat_planner.core.optimise.limits`) and with its flight-path angle held
-within the climb and dive limits. Once it flies along the plan (within ``ON_PATH`` turn
+within the climb and dive limits; near the floor (plus ``min_altitude_m``) it pulls up
+in time. Once it flies along the plan (within ``ON_PATH`` turn
 radii of it, and its direction within ``ALIGNED_DEG``), the plan's own vertices take
 over at the first joint whose path keeps every limit; failing all of them the
 pursuit goes on, through the goal where the last step into it keeps the limits (else it
@@ -15,6 +16,7 @@ not end within the limits.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
 
 import numpy as np
@@ -22,7 +24,7 @@ from numpy.typing import NDArray
 
 from threat_planner.core.optimise.limits import check_limits, FlightLimits
 
-__all__ = ['pursue_plan']
+__all__ = ['Pursuit', 'pursue_plan']
 
 #: Step of the pursuit, in turn radii: a chord of 0.25 R turns the fillet radius of the
 #: pursued arc down by 0.5 %, within MARGIN.
@@ -73,8 +75,32 @@ def _hold_pitch(v: NDArray, climb_deg: float, dive_deg: float) -> NDArray:
     return np.array([math.cos(p) * horiz[0], math.cos(p) * horiz[1], math.sin(p)])
 
 
+@dataclass(frozen=True)
+class Pursuit:
+    """A pursuit's path and where it had turned onto the plan.
+
+    Attributes
+    ----------
+    path : NDArray
+        The path (M, 3) [m], its first segment along the heading.
+    feasible : bool
+        Whether it meets the limits.
+    turned : NDArray or None
+        The pursuit up to where it first flew along the plan (K, 3) [m] (None: never),
+        from which a new plan may go on where the plan itself cannot be joined.
+    turned_heading : NDArray or None
+        Its direction there.
+
+    """
+
+    path: NDArray
+    feasible: bool
+    turned: NDArray | None = None
+    turned_heading: NDArray | None = None
+
+
 def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: float
-                ) -> tuple[NDArray, bool]:
+                ) -> Pursuit:
     """Return the plan `points` entered along `heading` by a pursuit (module docstring).
 
     A pursuit that cannot close in on a plan climbing or diving at the limit (it lags
@@ -94,20 +120,21 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
 
     Returns
     -------
-    tuple of (NDArray, bool)
-        The path, its first segment along `heading`, and whether it meets the limits.
+    Pursuit
+        The first pursuit's turn when none joins.
 
     """
-    path = None
+    first = None
     for look_z in LOOK_Z:
-        path, ok = _pursue(points, heading, limits, floor_z, look_z)
-        if ok:
-            return path, True
-    return path, False
+        got = _pursue(points, heading, limits, floor_z, look_z)
+        if got.feasible:
+            return got
+        first = first or got
+    return first
 
 
 def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: float,
-            look_z: float) -> tuple[NDArray, bool]:
+            look_z: float) -> Pursuit:
     """Fly one pursuit, aiming in height `look_z` turn radii ahead."""
     pts = np.asarray(points, float)
     radius = max(limits.min_turn_radius_m, 1e-3 * float(np.linalg.norm(pts[-1] - pts[0])))
@@ -121,32 +148,42 @@ def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: fl
     climb = limits.max_climb_deg if limits.climb_on else 90.0
     dive = limits.max_dive_deg if limits.dive_on else 90.0
     most = step / (MARGIN * radius)
+    low = floor_z + limits.min_altitude_m
     p, v = pts[0].copy(), _unit(np.asarray(heading, float))
     trail, i = [p.copy()], 0
     window = int(4 * step / max(dense_s[1], 1e-12)) + 2
     cos_aligned = math.cos(math.radians(ALIGNED_DEG))
+    turned = turned_heading = None
     for _ in range(int(4 * (length + 2 * math.pi * radius) / step) + 10):
         near = dense[i:i + window]
         i += int(np.argmin(np.linalg.norm(near - p, axis=1)))
         s_here = dense_s[i]
         aim = _along(pts, arc, last_dir, s_here + LOOK * radius)
         aim[2] = _along(pts, arc, last_dir, s_here + look_z * radius)[2]
+        # Pull up in time: levelling off from a dive at angle a takes R (1 - cos a).
+        dive_now = max(-math.asin(float(np.clip(v[2], -1.0, 1.0))), 0.0)
+        pull_up = p[2] - low <= MARGIN * radius * (1.0 - math.cos(dive_now)) + 2 * step
         tangent = _unit(dense[min(i + 1, len(dense) - 1)] - dense[max(i - 1, 0)])
         if (len(trail) > 1 and float(np.linalg.norm(p - dense[i])) <= ON_PATH * radius
                 and float(v @ tangent) >= cos_aligned and s_here < length - step):
+            if turned is None:
+                turned, turned_heading = np.array(trail), v.copy()
             joined = _join(trail, pts, arc, s_here, limits, floor_z)
             if joined is not None:
-                return joined, True
+                return Pursuit(joined, True, turned, turned_heading)
         if len(trail) > 1 and float(np.linalg.norm(pts[-1] - p)) <= 2 * step:
             path = np.vstack(trail + [pts[-1]])   # at the goal: ends here if it may
             if check_limits(path, limits, floor_z).feasible:
-                return path, True
-        if len(trail) > 1:     # the first step goes along the heading
+                return Pursuit(path, True, turned, turned_heading)
+        if len(trail) > 1 and pull_up and v[2] < 0:   # in its vertical plane, as tight
+            flat = _unit(np.array([v[0], v[1], 0.0]))
+            v = _turn_toward(v, flat if np.any(flat) else v, most)
+        elif len(trail) > 1:     # the first step goes along the heading
             v = _hold_pitch(_turn_toward(v, _unit(aim - p), most), climb, dive)
         p = p + step * v
         trail.append(p.copy())
     path = np.vstack(trail + [pts[-1]])
-    return path, check_limits(path, limits, floor_z).feasible
+    return Pursuit(path, check_limits(path, limits, floor_z).feasible, turned, turned_heading)
 
 
 def _along(pts: NDArray, arc: NDArray, last_dir: NDArray, s: float) -> NDArray:
