@@ -15,12 +15,10 @@ from threat_planner.core.inputs.config import PlannerConfig
 from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.optimise.limits import check_limits, FlightLimits
 
-DATA = Path(__file__).resolve().parents[1] / 'data'
-SCENARIO = DATA / 'uniform20_0.yaml'
-EVENTS = """events:
-  - {t: 2.0, add_threat: {position: [55.0, 45.0, 90.0], intensity: 2.0e5, lethal_radius: 6.0}}
-  - {t: 3.5, goal: [100.0, 85.0, 55.0]}
-"""
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIO = ROOT / 'test' / 'data' / 'uniform20_0.yaml'
+#: The example of docs/flight.md: a pop-up, a move, a removal and a new goal.
+EVENTS = ROOT / 'examples' / 'flight' / 'popup.yaml'
 #: The keys the issue asks OUT.json for, and the ones fly adds beside them.
 ISSUE_KEYS = {'flown', 'replans', 'J_flown', 'J_hindsight', 'max_jump_m', 'reached_goal'}
 MORE_KEYS = {'scenario', 'events_file', 'commit_s', 'w', 'start_heading', 'speed_mps',
@@ -36,8 +34,7 @@ def _run(*args):
 @pytest.fixture(scope='module')
 def flown(tmp_path_factory):
     out = tmp_path_factory.mktemp('fly')
-    (out / 'ev.yaml').write_text(EVENTS)
-    p = _run('fly', SCENARIO, '--events', out / 'ev.yaml', '--speed', '18', '--commit', '1.5',
+    p = _run('fly', SCENARIO, '--events', EVENTS, '--speed', '18', '--commit', '1.5',
              '--start-heading', '45', '0', '--json', out / 'flight.json', '--plot',
              out / 'fig' / 'flight.png')
     assert p.returncode == 0, p.stderr
@@ -50,8 +47,9 @@ def test_the_json_holds_the_issue_s_keys_and_the_flight(flown):
     t, path = data['flown']['t'], data['flown']['path']
     assert len(t) == len(path) > 10 and all(len(p) == 3 for p in path)
     assert t[0] == 0.0 and max(np.diff(t)) <= 0.1 + 1e-9
-    assert [r['reason'] for r in data['replans']] == ['start', 'add_threat at t=2',
-                                                      'goal at t=3.5']
+    assert [r['reason'] for r in data['replans']] == [
+        'start', 'add_threat at t=2', 'move_threat #10 at t=2.5', 'remove_threat #3 at t=3',
+        'goal at t=3.5']
     for r in data['replans']:
         assert {'t', 'latency_ms', 'reason'} <= set(r)
     assert data['replans'][1]['t'] == pytest.approx(2.0)
@@ -60,14 +58,14 @@ def test_the_json_holds_the_issue_s_keys_and_the_flight(flown):
     assert data['J_flown'] == data['flown_cost']['J'] > 0
     assert data['J_hindsight'] == data['hindsight_cost']['J'] > 0
     assert isinstance(data['reached_goal'], bool)
-    assert data['scenario'] == 'uniform20_0'
+    assert data['scenario'] == 'uniform20_0' and data['events_file'] == str(EVENTS)
 
 
 def test_the_summary_names_replans_costs_jump_goal_and_limits(flown):
     _, stdout, data = flown
     lines = stdout.splitlines()
     assert lines[0].startswith('uniform20_0: flew ') and '18 m/s (commit 1.5 s)' in lines[0]
-    assert sum(line.strip().startswith('replan t=') for line in lines) == 3
+    assert sum(line.strip().startswith('replan t=') for line in lines) == 5
     assert any(line.strip().startswith('replan t=2.00 s (add_threat at t=2): ')
                and ' ms, ' in line for line in lines)
     ratio = data['J_flown'] / data['J_hindsight']

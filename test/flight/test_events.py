@@ -197,3 +197,11 @@ def test_the_command_line_exits_2_with_one_line_naming_the_field(tmp_path, text,
     assert 'Traceback' not in p.stderr and p.stdout == ''
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], p.stderr
+
+
+def test_the_example_of_docs_flight_md_reads():
+    text = (Path(__file__).resolve().parents[2] / 'docs' / 'flight.md').read_text()
+    block = text.split('## Events files', 1)[1].split('```yaml\n', 1)[1].split('```', 1)[0]
+    events = parse_events(yaml.safe_load(block))
+    assert [e.kind for e in events] == ['add_threat', 'move_threat', 'remove_threat',
+                                        'add_zone', 'goal']
