@@ -213,11 +213,6 @@ def test_the_flown_path_keeps_out_of_the_pop_up_s_lethal_sphere(flight, events_d
     assert flight.lethal == []
 
 
-def test_the_hindsight_plan_is_no_worse_than_the_flight(flight):
-    assert flight.hindsight is not None
-    assert flight.hindsight.J <= flight.flown.J * (1 + 1e-9)
-
-
 def test_a_flight_without_events_flies_the_static_plan(scenario):
     still = replace(scenario, velocities=None)
     cfg = PlannerConfig()
