@@ -160,3 +160,18 @@ def test_plan_refuses_the_heading_with_a_robust_plan(capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ['threat-planner: error: start_heading: not with --robust (it would '
                    'describe the path before the heading)']
+
+
+def test_a_straight_flight_writes_strict_json_with_null_for_no_turn(tmp_path, capsys):
+    """A straight flight has no turn radius (inf in the report): null in OUT.json."""
+    (tmp_path / 'line.yaml').write_text(
+        'bounds: {min: [0, 0, 0], max: [100, 100, 100]}\nstart: [0, 0, 50]\n'
+        'goal: [100, 100, 50]\nthreats:\n  - {position: [50, 90, 10], intensity: 1.0}\n')
+    (tmp_path / 'none.yaml').write_text('events: []\n')
+    out = tmp_path / 'out.json'
+    assert main(['fly', str(tmp_path / 'line.yaml'), '--events', str(tmp_path / 'none.yaml'),
+                 '--json', str(out)]) == 0
+    assert 'turn radius none' in capsys.readouterr().out
+    data = json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(c))
+    assert data['flown_limits']['min_turn_radius_m'] is None
+    assert data['reached_goal'] is True and len(data['replans']) == 1
