@@ -40,6 +40,7 @@ NODE_TOPICS = ('threats', 'threat_poses', 'start', 'goal_pose', 'initial_path', 
 AIRSPACE_TOPICS = ('no_fly_zones', 'terrain')
 #: The GNSS fix inputs (issue 26), newer still.
 GEO_TOPICS = ('start_fix', 'goal_fix')
+FLIGHT_TOPICS = ('odom',)   # issue 44
 
 
 def cli(*args, env=None, timeout=300):
@@ -123,7 +124,8 @@ def test_plan_record_replays_and_matches_the_node(tmp_path):
     node_channels = channels(node_bag)
     # The committed bags predate the airspace topics; re-recorded, they hold them too.
     assert {t: recorded[t] for t in node_channels} == node_channels
-    assert set(recorded) == ({f'/{t}' for t in NODE_TOPICS + AIRSPACE_TOPICS + GEO_TOPICS}
+    assert set(recorded) == ({f'/{t}' for t in NODE_TOPICS + AIRSPACE_TOPICS + GEO_TOPICS
+                              + FLIGHT_TOPICS}
                              | {'/parameter_events'})
     assert set(node_channels) <= set(recorded)
     # ...the same parameter set, inputs and plan_info keys (the node's message code).

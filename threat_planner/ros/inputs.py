@@ -1,9 +1,9 @@
 """How an input becomes planner state: one place, used by the node and by replay.
 
 The node holds an :class:`InputState`; every input (a threat picture, a start, a goal,
-no-fly zones, a terrain height map, a set of parameter changes) goes through
-:func:`accept`, which returns the next state or raises InputError with the reason the node
-logs and publishes. Replay rebuilds the node's state from a recording with the same
+no-fly zones, a terrain height map, the vehicle's odometry, a set of parameter changes)
+goes through :func:`accept`, which returns the next state or raises InputError with the
+reason the node logs and publishes. Replay rebuilds the node's state from a recording with the same
 function, so a replayed plan starts from exactly what the node planned from. Which of the
 airspace inputs wins: :mod:`threat_planner.ros.airspace_input`.
 """
@@ -24,8 +24,10 @@ from threat_planner.core.world.zones import Zone
 from threat_planner.errors import InputError
 from threat_planner.ros.airspace_input import (airspace_of, check_airspace_endpoints,
                                                load_airspace_file)
-from threat_planner.ros.conversions import (point_from_navsatfix, point_from_pose_stamped,
-                                            threats_from_pointcloud2, threats_from_pose_array)
+from threat_planner.ros.conversions import (moving_threats_from_pointcloud2,
+                                            point_from_navsatfix, point_from_pose_stamped,
+                                            stamp_to_ns, threats_from_pose_array, Vehicle,
+                                            vehicle_from_odometry)
 from threat_planner.ros.conversions.airspace import terrain_from_image, zones_from_markers
 from threat_planner.ros.parameters import NodeSettings, settings_from_parameters
 
@@ -34,7 +36,7 @@ __all__ = ['INPUT_KINDS', 'InputState', 'NO_THREATS', 'accept', 'input_stamp']
 NO_THREATS = ThreatField.from_arrays(np.zeros((0, 3)), np.zeros(0))
 #: What :func:`accept` takes: the node's input topics and ``'parameters'``.
 INPUT_KINDS = ('threats', 'threat_poses', 'start', 'goal_pose', 'no_fly_zones', 'terrain',
-               'start_fix', 'goal_fix', 'parameters')
+               'start_fix', 'goal_fix', 'odom', 'parameters')
 #: Parameters that describe the grid of a height map received on topic ``terrain``.
 _TERRAIN_GRID = ('terrain_origin', 'terrain_resolution', 'terrain_clearance',
                  'terrain_masking')
@@ -61,6 +63,15 @@ class InputState:
     terrain_from_topic : bool
         Whether the terrain came from topic ``terrain`` (then the ``terrain_*``
         parameters set its grid).
+    velocities : NDArray or None
+        The threats' velocities (N, 3) [m/s] from a cloud's ``vx vy vz``; None for a
+        still picture.
+    threats_stamp_ns : int
+        When the picture's positions hold: the cloud's stamp [ns] (0 = unstamped; the node
+        puts its receipt time there).
+    vehicle : Vehicle or None
+        The vehicle's last accepted odometry; None until one arrives (and after a
+        ``start`` message or a frame change).
 
     """
 
@@ -72,6 +83,9 @@ class InputState:
     zones: Sequence[Zone] = ()
     terrain: Optional[Terrain] = None
     terrain_from_topic: bool = False
+    velocities: Optional[NDArray] = None
+    threats_stamp_ns: int = 0
+    vehicle: Optional[Vehicle] = None
 
     @classmethod
     def from_parameters(cls, values: Mapping[str, object]) -> 'InputState':
@@ -151,11 +165,12 @@ def _accept(state: InputState, kind: str, msg) -> InputState:
         start = settings.start if 'start' in msg else state.start
         goal = settings.goal if 'goal' in msg else state.goal
         threats = state.threats
+        vehicle = state.vehicle
         if settings.frame_id != s.frame_id:
             # The picture was received in the old frame; relabelling it would put every
             # threat in the wrong place. It is dropped (the node says so) until a picture
-            # in the new frame arrives.
-            threats = None
+            # in the new frame arrives; so is the vehicle's odometry.
+            threats = vehicle = None
         check_endpoints(start, goal, settings.box,
                         NO_THREATS if threats is None else threats)
         zones, terrain, from_topic = state.zones, state.terrain, state.terrain_from_topic
@@ -169,14 +184,26 @@ def _accept(state: InputState, kind: str, msg) -> InputState:
         check_airspace_endpoints(start, goal, airspace_of(zones, terrain))
         return replace(state, values=values, settings=settings, threats=threats,
                        start=start, goal=goal, zones=zones, terrain=terrain,
-                       terrain_from_topic=from_topic)
+                       terrain_from_topic=from_topic, vehicle=vehicle,
+                       velocities=None if threats is None else state.velocities)
     if kind in ('start', 'start_fix'):
         # geo (issue 26): a NavSatFix is converted with parameter datum, then taken alike
         start = (point_from_pose_stamped(msg, s.frame_id, 'start') if kind == 'start'
                  else point_from_navsatfix(msg, s.datum, kind))
         check_endpoints(start, state.goal, s.box, state.known_threats)
         check_airspace_endpoints(start, state.goal, state.airspace)
-        return replace(state, start=start)
+        # A start given is where the next plan starts: the vehicle's state is dropped
+        # until the next odometry.
+        return replace(state, start=start, vehicle=None)
+    if kind == 'odom':
+        vehicle = vehicle_from_odometry(msg, s.frame_id)
+        try:
+            check_endpoints(vehicle.position, state.goal, s.box, state.known_threats)
+            check_airspace_endpoints(vehicle.position, state.goal, state.airspace)
+        except InputError as exc:
+            raise InputError(f'odom pose.pose.position: {str(exc).replace("start: ", "")}'
+                             ) from None
+        return replace(state, vehicle=vehicle)
     if kind in ('goal_pose', 'goal_fix'):
         goal = (point_from_pose_stamped(msg, s.frame_id, 'goal_pose') if kind == 'goal_pose'
                 else point_from_navsatfix(msg, s.datum, kind))
@@ -197,17 +224,19 @@ def _accept(state: InputState, kind: str, msg) -> InputState:
         if count > s.max_threats:
             raise InputError(f'PointCloud2 has {count} threats, more than '
                              f'max_threats={s.max_threats}')
-        positions, intensities = threats_from_pointcloud2(msg, s.frame_id)
+        positions, intensities, velocities = moving_threats_from_pointcloud2(msg, s.frame_id)
     elif kind == 'threat_poses':
         if len(msg.poses) > s.max_threats:
             raise InputError(f'PoseArray has {len(msg.poses)} threats, more than '
                              f'max_threats={s.max_threats}')
         positions, intensities = threats_from_pose_array(msg, s.frame_id, s.default_intensity)
+        velocities = None
     else:
         raise ValueError(f'unknown input kind {kind!r}; expected one of {INPUT_KINDS}')
     threats = ThreatField.from_arrays(positions, intensities)
     check_endpoints(state.start, state.goal, s.box, threats)
-    return replace(state, threats=threats)
+    return replace(state, threats=threats, velocities=velocities,
+                   threats_stamp_ns=stamp_to_ns(msg.header.stamp))
 
 
 def _topic_terrain(settings: NodeSettings, heights: NDArray) -> Terrain:

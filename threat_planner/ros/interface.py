@@ -7,7 +7,8 @@ gets the current picture, and a volatile threat publisher is reported by rclpy a
 incompatible QoS. Start and goal subscribe volatile so that RViz's pose tools (volatile
 publishers) work. The GNSS fixes ``start_fix`` and ``goal_fix`` subscribe best effort:
 GNSS drivers publish sensor data best effort, which a reliable subscription would not
-match, and a best-effort one takes reliable publishers too. Outputs are latched
+match, and a best-effort one takes reliable publishers too; the vehicle's ``odom`` (issue
+44) is sensor data streamed at tens of hertz and subscribes alike. Outputs are latched
 (RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1).
 """
 
@@ -35,7 +36,7 @@ THREAT_INPUT = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
 POSE_INPUT = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE,
                         history=HistoryPolicy.KEEP_LAST, depth=10)
-#: GNSS fixes: best effort, as GNSS drivers publish.
+#: GNSS fixes and odometry: best effort, as sensor drivers publish.
 FIX_INPUT = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE,
                        history=HistoryPolicy.KEEP_LAST, depth=10)
@@ -57,6 +58,8 @@ INPUT_TOPICS = {
     # geo (issue 26): sensor_msgs/NavSatFix, converted into frame_id with parameter datum
     'start_fix': ('sensor_msgs/msg/NavSatFix', FIX_INPUT),
     'goal_fix': ('sensor_msgs/msg/NavSatFix', FIX_INPUT),
+    # flight (issue 44): the vehicle's position and velocity, a stream (ros/flight.py)
+    'odom': ('nav_msgs/msg/Odometry', FIX_INPUT),
 }
 #: The node's outputs: topic name (relative) -> (type, publisher QoS).
 OUTPUT_TOPICS = {

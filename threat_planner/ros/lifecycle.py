@@ -93,9 +93,9 @@ class ThreatPlannerLifecycleNode(ThreatPlannerNode, LifecycleNode):
 
     # -- hooks into the shared node logic --------------------------------------------
 
-    def _request_plan(self, source, stamp) -> None:
+    def _request_plan(self, source, stamp, reason: str = '') -> None:
         if self._active:
-            super()._request_plan(source, stamp)
+            super()._request_plan(source, stamp, reason)
 
     def _publish(self, name: str, msg) -> None:
         if self._active:

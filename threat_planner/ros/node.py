@@ -13,6 +13,7 @@ topic                     type                                QoS
 ``start_fix``, ``goal_fix`` sensor_msgs/NavSatFix (``datum``)  best effort, volatile, 10
 ``no_fly_zones`` (in)     visualization_msgs/MarkerArray      reliable, transient local, 10
 ``terrain`` (in)          sensor_msgs/Image (32FC1)           reliable, transient local, 10
+``odom`` (in)             nav_msgs/Odometry                   best effort, volatile, 10
 ``initial_path`` (out)    nav_msgs/Path (Dijkstra path)       reliable, transient local, 1
 ``path`` (out)            nav_msgs/Path (final path)          reliable, transient local, 1
 ``network`` (out)         visualization_msgs/MarkerArray      reliable, transient local, 1
@@ -24,7 +25,9 @@ QoS and the reasons for it: :mod:`threat_planner.ros.interface`; the airspace me
 input wins: :mod:`threat_planner.ros.airspace_input`.
 
 Every accepted input (a threat picture, start, goal or parameter change) gets the next
-input sequence number and triggers a replan. Planning runs in a worker thread so the
+input sequence number and triggers a replan; the vehicle's ``odom`` replans only by the
+rule of :mod:`threat_planner.ros.flight` (plans from the vehicle, in flight and through
+moving threats: :mod:`threat_planner.ros.flight_plan`). Planning runs in a worker thread so the
 executor keeps serving callbacks; inputs that arrive while a plan runs are coalesced into a
 single pending request holding the latest state (latest wins), and every request replaced
 that way is counted as ``inputs_skipped``. ``initial_path`` and ``path`` are published as
@@ -49,13 +52,13 @@ from __future__ import annotations
 
 import collections
 import threading
-from typing import Callable, Optional, Sequence, TYPE_CHECKING
+from typing import Callable, Optional, TYPE_CHECKING
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseStamped
-from nav_msgs.msg import Path
-from rcl_interfaces.msg import ParameterEvent, SetParametersResult
+from nav_msgs.msg import Odometry, Path
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image, NavSatFix, PointCloud2
@@ -63,14 +66,14 @@ from visualization_msgs.msg import MarkerArray
 
 from threat_planner.core.compiled import ensure_compiled, kernels_cached
 from threat_planner.errors import InputError, RecordingError
-from threat_planner.ros.conversions import plan_info_msg
+from threat_planner.ros.conversions import path_from_msg, plan_info_msg
+from threat_planner.ros.flight import FlightTracker
 from threat_planner.ros.inputs import accept, input_stamp, InputState
-from threat_planner.ros.interface import (INPUT_TOPICS, LATCHED, NODE_NAME, OUTPUT_TOPICS,
-                                          FIX_INPUT, PARAMETER_EVENT_TYPE,
-                                          PARAMETER_EVENTS_QOS, PARAMETER_EVENTS_TOPIC,
-                                          POSE_INPUT, THREAT_INPUT)
+from threat_planner.ros.interface import (FIX_INPUT, LATCHED, NODE_NAME, POSE_INPUT,
+                                          THREAT_INPUT)
 from threat_planner.ros.outputs import input_values, outcome_messages, PlanOutcome, PlanRequest
 from threat_planner.ros.parameters import declare_all, PARAMETER_DEFAULTS, PLANNING_PARAMETERS
+from threat_planner.ros.node_recording import NodeRecording
 from threat_planner.ros.plan_service import PlanService
 from threat_planner.ros.process import run_node
 from threat_planner.ros.worker import ProcessPlanWorker
@@ -80,7 +83,7 @@ if TYPE_CHECKING:  # mcap loads when a recording opens, not at every start
 __all__ = ['ThreatPlannerNode', 'main']
 
 
-class ThreatPlannerNode(Node):
+class ThreatPlannerNode(NodeRecording, Node):
     """The planner node; see the module docstring.
 
     Parameters
@@ -121,6 +124,7 @@ class ThreatPlannerNode(Node):
         """Validate the parameters into the state, start the worker, open the recording."""
         self._state = InputState.from_parameters(self._parameter_values())
         self._seq = self._received = self._rejected = self._skipped = self._plans = 0
+        self._flight = FlightTracker()   # flight (issue 44): the vehicle and its trajectory
         self._staged: Optional[tuple[InputState, Optional[McapRecorder]]] = None
         self._recorder: Optional[McapRecorder] = None
         self._outcomes: collections.deque[tuple[str, PlanOutcome]] = collections.deque()
@@ -172,6 +176,9 @@ class ThreatPlannerNode(Node):
             # geo (issue 26): GNSS fixes, converted with parameter datum
             **{k: self.create_subscription(NavSatFix, k, lambda m, k=k: self._receive(k, m),
                                            FIX_INPUT) for k in ('start_fix', 'goal_fix')},
+            # flight (issue 44): the vehicle's odometry, a sensor stream
+            'odom': self.create_subscription(
+                Odometry, 'odom', lambda m: self._receive('odom', m), FIX_INPUT),
         }
 
     def _load_kernels(self) -> None:
@@ -227,6 +234,8 @@ class ThreatPlannerNode(Node):
         self._staged = None
         names = {p.name for p in params}
         previous, self._state = self._state, state
+        if previous.settings.frame_id != state.settings.frame_id:
+            self._flight.reset()   # the trajectory flown is in the old frame
         if previous.threats is not None and state.threats is None:
             self._frame_changed(previous.settings.frame_id, state.settings.frame_id)
         if 'record' in names and (recorder is not None or not state.settings.record):
@@ -250,76 +259,6 @@ class ThreatPlannerNode(Node):
         values['threats_dropped'] = 'true'
         self._publish('plan_info', plan_info_msg('WARN', message, values, stamp))
 
-    # -- recording -------------------------------------------------------------------
-
-    def _open_recorder(self, target: str) -> McapRecorder:
-        from threat_planner.bag import McapRecorder
-        recorder = McapRecorder(target, prefix=NODE_NAME)
-        try:
-            # From the interface, not the endpoints: a managed node records from configure
-            # on, before its subscriptions exist.
-            for name, (type_name, qos) in {**INPUT_TOPICS, **OUTPUT_TOPICS}.items():
-                recorder.add_topic(self.resolve_topic_name(name), type_name, qos)
-            recorder.add_topic(PARAMETER_EVENTS_TOPIC, PARAMETER_EVENT_TYPE,
-                               PARAMETER_EVENTS_QOS)
-            # The full parameter set first, so the recording alone says how the node was set.
-            event = self._parameter_event()
-            event.new_parameters = [self.get_parameter(n).to_parameter_msg()
-                                    for n in PARAMETER_DEFAULTS]
-            recorder.write(PARAMETER_EVENTS_TOPIC, event, log_time_ns=self._now_ns())
-        except RecordingError:
-            recorder.close()
-            raise
-        self.get_logger().info(f'recording inputs and outputs to {recorder.path}')
-        return recorder
-
-    def _recording_failed(self, exc: RecordingError) -> None:
-        recorder, self._recorder = self._recorder, None
-        message = (f'recording stopped after {recorder.message_count} messages, planning '
-                   f'continues: {exc}')
-        self.get_logger().error(message)
-        try:
-            recorder.close()
-        except RecordingError:
-            pass  # the recorder failed already; close() only releases the file
-        values = self._input_values(self._seq, 'recording', Time())
-        values['recording_error'] = str(exc)
-        self._publish('plan_info', plan_info_msg('WARN', message, values, Time()))
-
-    def _close_recorder(self) -> None:
-        recorder, self._recorder = self._recorder, None
-        if recorder is None:
-            return
-        try:
-            recorder.close()
-            self.get_logger().info(
-                f'closed recording {recorder.path} ({recorder.message_count} messages)')
-        except RecordingError as exc:
-            self.get_logger().error(f'recording: {exc}')
-
-    def _parameter_event(self) -> ParameterEvent:
-        return ParameterEvent(stamp=self.get_clock().now().to_msg(),
-                              node=self.get_fully_qualified_name())
-
-    def _record_parameter_event(self, params: Sequence[Parameter]) -> None:
-        if self._recorder is None:
-            return
-        event = self._parameter_event()
-        event.changed_parameters = [p.to_parameter_msg() for p in params]
-        self._record(PARAMETER_EVENTS_TOPIC, event)
-
-    def _record(self, topic: str, msg: object) -> None:
-        if self._recorder is None:
-            return
-        try:
-            self._recorder.write(topic, msg, log_time_ns=self._now_ns())
-        except RecordingError as exc:
-            # reliability (issue 14): disk full or similar: stop recording, keep planning.
-            self._recording_failed(exc)
-
-    def _now_ns(self) -> int:
-        return self.get_clock().now().nanoseconds
-
     # -- inputs ----------------------------------------------------------------------
 
     def _receive(self, kind: str, msg) -> None:
@@ -329,12 +268,18 @@ class ThreatPlannerNode(Node):
         self._seq += 1
         self._received += 1
         stamp = input_stamp(msg)  # airspace (issue 12): a MarkerArray has no header
+        now = self._now_ns()
         try:
-            self._state = accept(self._state, kind, msg)
+            self._state = self._flight.took(accept(self._state, kind, msg), kind, now)
         except InputError as exc:
+            if kind == 'odom' and not self._flight.refused(str(exc)):
+                self._rejected += 1   # counted in plan_info; said once per kind of reason
+                return
             self._reject(topic, stamp, str(exc))
             return
-        self._request_plan(topic, stamp)
+        reason = self._flight.trigger(self._state, now) if kind == 'odom' else ''
+        if reason is not None:
+            self._request_plan(topic, stamp, reason)
 
     def _reject(self, source: str, stamp: Time, reason: str) -> None:
         self._rejected += 1
@@ -344,17 +289,26 @@ class ThreatPlannerNode(Node):
         values['error'] = reason
         self._publish('plan_info', plan_info_msg('ERROR', message, values, stamp))
 
-    def _request_plan(self, source: str, stamp: Time) -> None:
+    def _request_plan(self, source: str, stamp: Time, reason: str = '') -> None:
         state = self._state
         if state.threats is None:
             self.get_logger().info(
                 f'input #{self._seq} ({source}) stored; no plan until a threat picture '
                 'arrives')
             return
-        request = PlanRequest(seq=self._seq, source=source, stamp=stamp,
-                              received_ns=self._now_ns(), threats=state.threats,
-                              start=state.start, goal=state.goal, settings=state.settings,
-                              airspace=state.airspace)  # airspace (issue 12)
+        now = self._now_ns()
+        flight = self._flight.request_fields(state, now)
+        if flight is None:
+            self.get_logger().info(f'input #{self._seq} ({source}): the vehicle is within '
+                                   'commit_s of the goal; the trajectory flown stands')
+            return
+        request = PlanRequest(seq=self._seq, source=source, stamp=stamp, received_ns=now,
+                              threats=state.threats, start=state.start, goal=state.goal,
+                              settings=state.settings,
+                              airspace=state.airspace,  # airspace (issue 12)
+                              velocities=state.velocities,  # flight (issue 44)
+                              threats_t_ns=state.threats_stamp_ns, reason=reason, **flight)
+        self._flight.requested(request)
         if self._worker.submit(request):
             self._skipped += 1
 
@@ -378,7 +332,8 @@ class ThreatPlannerNode(Node):
 
     def _input_values(self, seq: int, source: str, stamp: Time) -> dict[str, object]:
         return input_values(seq, source, stamp, self._state.settings.frame_id,
-                            self._received, self._rejected, self._skipped, self._plans)
+                            self._received, self._rejected, self._skipped, self._plans,
+                            self._flight.odom_rejected)
 
     def _publish_outcomes(self) -> None:
         while True:
@@ -387,6 +342,7 @@ class ThreatPlannerNode(Node):
                     return
                 phase, outcome = self._outcomes.popleft()
             req = outcome.request
+            self._track(phase, outcome)
             if phase == 'cancelled':
                 self._skipped += 1
                 self.get_logger().info(f'plan for input #{req.seq} cancelled after '
@@ -407,6 +363,14 @@ class ThreatPlannerNode(Node):
                 self.get_logger().error(messages[-1][1].status[0].message)
             elif phase == 'timeout':   # issue 14: timed out, best path so far published
                 self.get_logger().warning(messages[-1][1].status[0].message)
+
+    def _track(self, phase: str, outcome: PlanOutcome) -> None:
+        """Note the trajectory published (the one the vehicle flies) and the plan's end."""
+        path = {'paths': outcome.path, 'timeout': outcome.best_so_far}.get(phase)
+        if path is not None:
+            self._flight.planned(outcome.request, path_from_msg(path))
+        if phase in ('paths', 'error', 'timeout'):
+            self._flight.answered(outcome.request.seq)
 
     # -- life cycle ------------------------------------------------------------------
 

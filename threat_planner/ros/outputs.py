@@ -12,7 +12,10 @@ when the input that asked for the plan arrived (``PlanRequest.received_ns``, the
 own clock, sim time included, which a plan process cannot read), and pose k is stamped
 t0 + t_k, the time over point k at the cruise speed ``speed_mps``
 (:func:`threat_planner.core.trajectory.point_times`). ``plan_info`` gives t0 as
-``t0_ns``, which is how a reader pairs the paths with the input they answer.
+``t0_ns``, which is how a reader pairs the paths with the input they answer. A request
+that knows the vehicle (``odom``) or moving threats is planned in time
+(:mod:`threat_planner.ros.flight_plan`): its path is stamped with the times of the
+trajectory planned, a replan in flight's with those of the splice.
 """
 
 from __future__ import annotations
@@ -23,7 +26,6 @@ import time
 from typing import Callable, Mapping, Optional
 
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Path
 from numpy.typing import NDArray
 from visualization_msgs.msg import MarkerArray
@@ -34,10 +36,11 @@ from threat_planner.core.trajectory import point_times
 from threat_planner.core.world.airspace import Airspace
 from threat_planner.core.world.threats import Box, ThreatField
 from threat_planner.errors import InputError, PlanningError
-from threat_planner.ros.conversions import (network_markers, ns_to_stamp, path_to_msg,
-                                            plan_info_msg, stamp_to_ns)
+from threat_planner.ros.conversions import network_markers, ns_to_stamp, path_to_msg, Vehicle
 from threat_planner.ros.conversions.markers import airspace_markers
 from threat_planner.ros.parameters import NodeSettings
+from threat_planner.ros.plan_info import (input_values, plan_done_info, plan_error_info,
+                                          plan_timeout_info)
 
 __all__ = ['PlanOutcome', 'PlanRequest', 'input_values', 'outcome_messages', 'plan_done_info',
            'plan_error_info', 'plan_markers', 'plan_timeout_info', 'run_plan',
@@ -57,6 +60,15 @@ class PlanRequest:
     goal: NDArray
     settings: NodeSettings
     airspace: Optional[Airspace] = None
+    # flight (issue 44; ros/flight.py, ros/flight_plan.py): threat velocities (N, 3) [m/s]
+    # and when the positions hold [ns]; the vehicle; the trajectory flown and the
+    # vehicle's arc length on it at t0 [m], for a replan in flight; why it was asked for.
+    velocities: Optional[NDArray] = None
+    threats_t_ns: int = 0
+    vehicle: Optional[Vehicle] = None
+    flown: Optional[NDArray] = None
+    s_now: float = 0.0
+    reason: str = ''
 
 
 @dataclass
@@ -79,6 +91,9 @@ class PlanOutcome:
     queue_ms: float = 0.0
     plan_ms: float = 0.0
     messages_ms: float = 0.0
+    #: A timed plan's: the static result planned (the next warm start) and its values.
+    static: Optional[PlanResult] = None
+    values: Optional[dict] = None
 
 
 def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None],
@@ -131,15 +146,25 @@ def run_plan(request: PlanRequest, hand_over: Callable[[str, PlanOutcome], None]
     # Here, not at the top: the node's own process imports this module but plans in a
     # child, which imports the planner (and its scipy.spatial) before it reports ready.
     from threat_planner.core.planner import plan
+    from threat_planner.ros.flight_plan import is_timed, plan_flight
     try:
-        result = plan(request.threats, request.start, request.goal, s.box, s.config,
-                      progress=progress, on_initial=None if early is None else on_initial,
-                      airspace=request.airspace, warm_start=warm_start)
+        if is_timed(request):
+            # No best path so far: a timed-out plan in flight keeps the last good one.
+            answer = plan_flight(request, warm_start)
+            result, outcome.static, outcome.values = answer.result, answer.static, \
+                answer.values
+            outcome.initial_path = path_to_msg(result.initial_path, s.frame_id, start,
+                                               answer.initial_times)
+            outcome.path = path_to_msg(answer.points, s.frame_id, start, answer.times)
+        else:
+            result = plan(request.threats, request.start, request.goal, s.box, s.config,
+                          progress=progress, on_initial=None if early is None else on_initial,
+                          airspace=request.airspace, warm_start=warm_start)
+            outcome.initial_path = timed(result.initial_path)
+            outcome.path = timed(result.path)
         t1 = time.perf_counter()
         outcome.plan_ms = 1e3 * (t1 - t0)
         outcome.result = result
-        outcome.initial_path = timed(result.initial_path)
-        outcome.path = timed(result.path)
     except (InputError, PlanningError) as exc:
         outcome.error, outcome.exception = str(exc), exc
     except Exception as exc:  # noqa: B902 - a planner bug must not kill the worker
@@ -191,18 +216,9 @@ def outcome_messages(phase: str, outcome: PlanOutcome,
                                               req.stamp))]
     info = plan_done_info(values, outcome.result, len(req.threats), req.stamp,
                           outcome.queue_ms, outcome.plan_ms, outcome.messages_ms,
-                          outcome.network_error, t0_ns=req.received_ns)
+                          outcome.network_error, t0_ns=req.received_ns, extra=outcome.values)
     network = [] if outcome.network is None else [('network', outcome.network)]
     return network + [('plan_info', info)]
-
-
-def plan_error_info(values: Mapping[str, object], seq: int, source: str, error: str,
-                    stamp: Time) -> DiagnosticArray:
-    """Build the ERROR ``plan_info`` of a plan that failed; its message is the log line."""
-    values = dict(values)
-    values['error'] = error
-    return plan_info_msg('ERROR', f'plan for input #{seq} ({source}) failed: {error}',
-                         values, stamp)
 
 
 def timeout_outcome(request: PlanRequest, best_so_far: Optional[PlanOutcome],
@@ -232,57 +248,6 @@ def timeout_outcome(request: PlanRequest, best_so_far: Optional[PlanOutcome],
     best_so_far.error = (error + '; published the best path so far: the network route, '
                          'before smoothing and optimisation')
     return 'timeout', best_so_far
-
-
-def plan_timeout_info(values: Mapping[str, object], outcome: PlanOutcome) -> DiagnosticArray:
-    """Build the WARN ``plan_info`` of a timed-out plan published with its best path so far."""
-    req, cost = outcome.request, outcome.best_so_far_cost
-    values = dict(values)
-    values.update({'error': outcome.error, 'timed_out': True, 'best_so_far': 'initial',
-                   'method': req.settings.config.method, 'w': req.settings.config.w,
-                   'threats': len(req.threats), 'J': cost.J, 'J_L': cost.J_L,
-                   'J_R': cost.J_R, 'path_points': outcome.best_so_far_points,
-                   't0_ns': req.received_ns, 'speed_mps': req.settings.config.speed_mps,
-                   'eta_s': outcome.best_so_far_eta_s,
-                   'queue_ms': outcome.queue_ms, 'plan_wall_ms': outcome.plan_ms})
-    message = (f'plan for input #{req.seq} ({req.source}) {outcome.error}; '
-               f'J={cost.J:.6g}')
-    return plan_info_msg('WARN', message, values, req.stamp)
-
-
-def input_values(seq: int, source: str, stamp: Time, frame_id: str, received: int,
-                 rejected: int, skipped: int, plans: int) -> dict[str, object]:
-    """Return the ``plan_info`` values naming an input and the node's counters.
-
-    Parameters
-    ----------
-    seq : int
-        Input sequence number.
-    source : str
-        Topic of the input, or ``'parameters'``.
-    stamp : builtin_interfaces.msg.Time
-        The input's stamp.
-    frame_id : str
-        Frame of the outputs.
-    received, rejected, skipped, plans : int
-        Counters of inputs received, rejected and skipped, and of plans completed.
-
-    Returns
-    -------
-    dict[str, object]
-        Keys in ``plan_info`` order.
-
-    """
-    return {
-        'input_seq': seq,
-        'input_source': source,
-        'input_stamp_ns': stamp_to_ns(stamp),
-        'frame_id': frame_id,
-        'inputs_received': received,
-        'inputs_rejected': rejected,
-        'inputs_skipped': skipped,
-        'plans_completed': plans,
-    }
 
 
 def plan_markers(result: PlanResult, threats: ThreatField, box: Box, frame_id: str,
@@ -321,95 +286,3 @@ def plan_markers(result: PlanResult, threats: ThreatField, box: Box, frame_id: s
     if airspace is not None:
         markers.markers.extend(airspace_markers(airspace, frame_id, stamp, 0.2 * scale))
     return markers
-
-
-def plan_done_info(values: Mapping[str, object], result: PlanResult, n_threats: int,
-                   stamp: Time, queue_ms: float, plan_ms: float, messages_ms: float,
-                   network_error: Optional[str] = None,
-                   t0_ns: Optional[int] = None) -> DiagnosticArray:
-    """Build the ``plan_info`` of a finished plan (OK, or WARN if an angle limit is broken).
-
-    Parameters
-    ----------
-    values : Mapping[str, object]
-        The input's values (:func:`input_values`); the result's are appended.
-    result : PlanResult
-        The plan.
-    n_threats : int
-        Threats planned through.
-    stamp : builtin_interfaces.msg.Time
-        The input's stamp.
-    queue_ms, plan_ms, messages_ms : float
-        Wait before planning, planning and marker drawing times [ms].
-    network_error : str, optional
-        Why the markers could not be drawn.
-    t0_ns : int, optional
-        The paths' header stamp, the trajectory's t0 [ns], given as ``t0_ns``.
-
-    Returns
-    -------
-    DiagnosticArray
-        The message; its status message is the node's log line.
-
-    """
-    values = dict(values)
-    values.update(_result_values(result, n_threats))
-    if t0_ns is not None:
-        values['t0_ns'] = int(t0_ns)
-    values['queue_ms'] = queue_ms
-    values['plan_wall_ms'] = plan_ms
-    values['messages_ms'] = messages_ms
-    if network_error is not None:
-        values['network_error'] = network_error
-    status = 'OK' if result.feasible else 'WARN'
-    message = (f'plan for input #{values["input_seq"]} ({values["input_source"]}): '
-               f'J={result.cost.J:.6g} through {n_threats} threats in {plan_ms:.0f} ms'
-               + ('' if result.feasible else '; violates a flight limit'))
-    return plan_info_msg(status, message, values, stamp)
-
-
-def _result_values(result: PlanResult, n_threats: int) -> dict[str, object]:
-    values: dict[str, object] = {
-        'method': result.method,
-        'w': result.w,
-        'threats': n_threats,
-        'J': result.cost.J,
-        'J_L': result.cost.J_L,
-        'J_R': result.cost.J_R,
-        'initial_J': result.initial_cost.J,
-        'initial_J_L': result.initial_cost.J_L,
-        'initial_J_R': result.initial_cost.J_R,
-        'nodes': result.network.n_nodes,
-        'edges': result.network.n_edges,
-        'entry': result.entry,
-        'exit': result.exit,
-        'k': result.k,
-        'feasible': result.feasible,
-        'max_pitch_deg': result.angles.max_pitch_deg,
-        'max_turn_deg': result.angles.max_turn_deg,
-        'path_points': len(result.path),
-        'initial_path_points': len(result.initial_path),
-        # Trajectory (issue 44): the path's poses are stamped t0 + t_k at this speed.
-        'speed_mps': result.speed_mps,
-        'eta_s': result.eta_s,
-    }
-    # Physical limits (method 'best'): those in force, the path's own values, the worst
-    # violation ('' when feasible). Infinities (a straight path's radius) print as inf.
-    for key, limit in result.limits.as_dict().items():
-        values[f'limit_{key}'] = limit
-    check = result.limit_check
-    if check is not None:
-        values['path_climb_deg'] = check.climb_deg
-        values['path_dive_deg'] = check.dive_deg
-        values['path_min_turn_radius_m'] = check.min_turn_radius_m
-        values['path_min_altitude_m'] = check.min_altitude_m
-        values['limits_feasible'] = check.feasible
-        values['worst_violation'] = '' if check.worst is None else (
-            f'{check.worst} {check.violations[check.worst]:.6g}')
-    values['start'] = 'warm' if getattr(result, 'warm', False) else 'cold'
-    if result.clearance is not None:   # airspace (issue 12): smallest margins [m]
-        c = result.clearance
-        values['clearance_zones_m'] = c.zones_m
-        values['clearance_terrain_m'] = c.terrain_m
-    values.update(result.timings_ms)
-    return values

@@ -9,6 +9,11 @@ topic-triggered plan runs; at most :data:`QUEUE_BOUND` requests wait, a request 
 that is answered at once with an empty path. The service callback is a coroutine that
 awaits the answer, so the executor keeps spinning while a request is planned. A refused or
 failed request gets an empty path and one WARN log line with the reason.
+
+Threats that move (a cloud's ``vx vy vz``) are planned in time from the request's t0, the
+goal's stamp (the cloud's own time when the goal is unstamped), as the node plans them
+(:mod:`threat_planner.ros.flight_plan`). The request carries no velocity: a GetPlan plan
+starts at rest, and ignores the vehicle's odometry.
 """
 
 from __future__ import annotations
@@ -26,7 +31,8 @@ from rclpy.task import Future
 
 from threat_planner.core.trajectory import point_times
 from threat_planner.errors import InputError, PlanningError
-from threat_planner.ros.conversions import path_to_msg
+from threat_planner.ros.conversions import path_to_msg, stamp_to_ns
+from threat_planner.ros.flight import moving, timeline_of
 from threat_planner.ros.inputs import accept, InputState
 
 __all__ = ['PLAN_SERVICE', 'PlanService', 'QUEUE_BOUND', 'plan_on_request']
@@ -61,15 +67,26 @@ def plan_on_request(state: InputState, request: GetPlan.Request) -> tuple[Path, 
         s = accept(state, 'start', request.start)
         s = accept(s, 'goal_pose', request.goal)
         from threat_planner.core.planner import plan  # loaded by PlanService._loop
-        result = plan(s.threats, s.start, s.goal, s.settings.box, s.settings.config,
-                      airspace=s.airspace)
+        cfg = s.settings.config
+        if moving(s.velocities):
+            from threat_planner.core.flight.replan import plan_in_time
+            t0_ns = stamp_to_ns(request.goal.header.stamp) or s.threats_stamp_ns
+            air = s.airspace
+            timed = plan_in_time(timeline_of(s.threats, s.velocities, s.threats_stamp_ns, t0_ns),
+                                 s.start, s.goal, s.settings.box, cfg, cfg.speed_mps,
+                                 zones=() if air is None else tuple(air.zones),
+                                 terrain=None if air is None else air.terrain)
+            points, times = timed.points, timed.times
+        else:
+            points = plan(s.threats, s.start, s.goal, s.settings.box, cfg,
+                          airspace=s.airspace).path
+            times = point_times(points, cfg.speed_mps)
     except (InputError, PlanningError) as exc:
         return _empty_path(frame_id, request), str(exc)
     except Exception as exc:  # noqa: B902 - a planner bug must not kill the service
         return _empty_path(frame_id, request), f'planner failed: {type(exc).__name__}: {exc}'
     # A trajectory from the requester's t0, the goal's stamp: pose k at t0 + t_k (issue 44).
-    times = point_times(result.path, s.settings.config.speed_mps)
-    return path_to_msg(result.path, frame_id, request.goal.header.stamp, times), ''
+    return path_to_msg(points, frame_id, request.goal.header.stamp, times), ''
 
 
 def _empty_path(frame_id: str, request: GetPlan.Request) -> Path:

@@ -166,7 +166,8 @@ def _child_main(conn, ready=None, go=None) -> None:
         conn.send(('started', None))
         warm = previous if request.settings.warm_replan else None
         outcome = run_plan(request, hand_over, time.time_ns, early=early, warm_start=warm)
-        previous = outcome.result if outcome.result is not None else previous
+        # A timed plan's static result (its path as planned, not as published) warms the next.
+        previous = (outcome.static or outcome.result) if outcome.result is not None else previous
         conn.send(('end', None))
 
 
