@@ -169,11 +169,8 @@ def test_each_event_replans_and_the_path_never_jumps(flight):
     assert flight.max_jump_m <= 0.5
 
 
-@pytest.mark.xfail(strict=True, reason="enter()'s turn-in leaves the box (by 2.66 m after "
-                   "the pop-up, 0.52 m after the move) and Entry.feasible says True; the "
-                   "removal's commit point is then outside it (y = 100.156) and its replan "
-                   "fails ('start: ... is outside bounds'): the removal is never planned for")
 def test_every_replan_succeeds(flight):
+    # The turn-in used to leave the box (2.66 m) and a later commit point was outside it.
     assert [r.get('error') for r in flight.replans] == [None] * 5
 
 

@@ -49,7 +49,8 @@ class Entry:
     changed : int
         Vertices moved (0: the plan already left along the heading).
     feasible : bool
-        Whether the path meets the limits and leaves along the heading.
+        Whether the path meets the limits, stays in the box (when one is given) and
+        leaves along the heading.
     turn_deg : float
         Angle between the heading and the plan's first segment before [deg].
 
@@ -118,16 +119,18 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
     # atan2, not acos: acos loses half the digits near an angle of 0.
     turn = math.atan2(float(np.linalg.norm(np.cross(first, h))), float(first @ h))
     if turn <= ALIGNED or len(pts) < 3:
-        ok = turn <= ALIGNED and check_limits(pts, limits, _floor(box)).feasible
+        ok = (turn <= ALIGNED and _inside(pts, box)
+              and check_limits(pts, limits, _floor(box)).feasible)
         return Entry(pts, 0, ok, math.degrees(turn))
     if len(pts) < 4:   # one free vertex is too few to turn in: add vertices evenly
         pts = np.vstack([pts[:1], pts[0] + np.linspace(0, 1, 5)[1:-1, None] * (
             pts[1] - pts[0]), pts[1:]])
     floor = _floor(box)
+    corners = None if box is None else (box.lo, box.hi)
     # A pursuit of the plan within the limits is flyable by construction (.turn_in).
     # SLSQP from it never ended lower within the limits (18 headings on a 20-threat
     # field: 0 of 18, at 30-900 ms each against 1-3 ms for the pursuit), so it is kept.
-    got = pursue_plan(pts, h, limits, floor)
+    got = pursue_plan(pts, h, limits, floor, corners)
     if got.feasible:
         return Entry(got.path, len(got.path) - 1 - _tail_vertices(got.path, pts), True,
                      math.degrees(turn))
@@ -140,11 +143,11 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
         except ThreatPlannerError:
             again = None
         if again is not None:
-            rest = pursue_plan(again, got.turned_heading, limits, floor)
+            rest = pursue_plan(again, got.turned_heading, limits, floor, corners)
             # Without the joint vertex: the two steps either side of it are collinear,
             # and as one segment the turn after it keeps the share it had in `rest`.
             joined = np.vstack([got.turned[:-1], rest.path[1:]])
-            if check_limits(joined, limits, floor).feasible:
+            if _inside(joined, box) and check_limits(joined, limits, floor).feasible:
                 return Entry(joined, len(joined) - 1, True, math.degrees(turn))
     best, best_excess = guess, _relative_excess(
         check_limits(guess, limits, floor).violations, limits)
@@ -163,7 +166,7 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
             out, x = _solve(pts, h, k, radius * limits.min_turn_radius_m, x, threats, box,
                             w, limits)
             check = check_limits(out, limits, floor)
-            if check.feasible:
+            if check.feasible and _inside(out, box):
                 return Entry(out, k, True, math.degrees(turn))
             excess = _relative_excess(check.violations, limits)
             if excess < best_excess:
@@ -277,6 +280,10 @@ def _relative_excess(violations: dict[str, float], limits: FlightLimits) -> floa
             'turn_radius_m': limits.min_turn_radius_m,
             'altitude_m': max(limits.min_altitude_m, 1.0)}
     return max(v / unit[k] for k, v in violations.items())
+
+
+def _inside(path: NDArray, box: Box | None) -> bool:
+    return box is None or bool(np.all(path >= box.lo - 1e-9) and np.all(path <= box.hi + 1e-9))
 
 
 def _floor(box: Box | None) -> float:

@@ -99,8 +99,8 @@ class Pursuit:
     turned_heading: NDArray | None = None
 
 
-def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: float
-                ) -> Pursuit:
+def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: float,
+                box: tuple[NDArray, NDArray] | None = None) -> Pursuit:
     """Return the plan `points` entered along `heading` by a pursuit (module docstring).
 
     A pursuit that cannot close in on a plan climbing or diving at the limit (it lags
@@ -117,6 +117,9 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
         The turn radius, climb and dive the pursuit keeps.
     floor_z : float
         z of the box floor [m], for the altitude limit of the check.
+    box : tuple of NDArray, optional
+        Corners (lo, hi) [m] the path must stay within; near a wall the pursuit aims
+        inside it.
 
     Returns
     -------
@@ -126,7 +129,7 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
     """
     first = None
     for look_z in LOOK_Z:
-        got = _pursue(points, heading, limits, floor_z, look_z)
+        got = _pursue(points, heading, limits, floor_z, look_z, box)
         if got.feasible:
             return got
         first = first or got
@@ -134,7 +137,7 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
 
 
 def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: float,
-            look_z: float) -> Pursuit:
+            look_z: float, box: tuple[NDArray, NDArray] | None) -> Pursuit:
     """Fly one pursuit, aiming in height `look_z` turn radii ahead."""
     pts = np.asarray(points, float)
     radius = max(limits.min_turn_radius_m, 1e-3 * float(np.linalg.norm(pts[-1] - pts[0])))
@@ -163,17 +166,22 @@ def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: fl
         # Pull up in time: levelling off from a dive at angle a takes R (1 - cos a).
         dive_now = max(-math.asin(float(np.clip(v[2], -1.0, 1.0))), 0.0)
         pull_up = p[2] - low <= MARGIN * radius * (1.0 - math.cos(dive_now)) + 2 * step
+        if box is not None:
+            # Near a wall, aim inside it: where the vehicle would be a turn radius on.
+            ahead = p + radius * v
+            if np.any(ahead < box[0]) or np.any(ahead > box[1]):
+                aim = np.clip(aim, box[0] + radius, box[1] - radius)
         tangent = _unit(dense[min(i + 1, len(dense) - 1)] - dense[max(i - 1, 0)])
         if (len(trail) > 1 and float(np.linalg.norm(p - dense[i])) <= ON_PATH * radius
                 and float(v @ tangent) >= cos_aligned and s_here < length - step):
             if turned is None:
                 turned, turned_heading = np.array(trail), v.copy()
-            joined = _join(trail, pts, arc, s_here, limits, floor_z)
+            joined = _join(trail, pts, arc, s_here, limits, floor_z, box)
             if joined is not None:
                 return Pursuit(joined, True, turned, turned_heading)
         if len(trail) > 1 and float(np.linalg.norm(pts[-1] - p)) <= 2 * step:
             path = np.vstack(trail + [pts[-1]])   # at the goal: ends here if it may
-            if check_limits(path, limits, floor_z).feasible:
+            if _fits(path, limits, floor_z, box):
                 return Pursuit(path, True, turned, turned_heading)
         if len(trail) > 1 and pull_up and v[2] < 0:   # in its vertical plane, as tight
             flat = _unit(np.array([v[0], v[1], 0.0]))
@@ -183,7 +191,7 @@ def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: fl
         p = p + step * v
         trail.append(p.copy())
     path = np.vstack(trail + [pts[-1]])
-    return Pursuit(path, check_limits(path, limits, floor_z).feasible, turned, turned_heading)
+    return Pursuit(path, _fits(path, limits, floor_z, box), turned, turned_heading)
 
 
 def _along(pts: NDArray, arc: NDArray, last_dir: NDArray, s: float) -> NDArray:
@@ -193,8 +201,17 @@ def _along(pts: NDArray, arc: NDArray, last_dir: NDArray, s: float) -> NDArray:
     return pts[-1] + (s - arc[-1]) * last_dir
 
 
+def _fits(path: NDArray, limits: FlightLimits, floor_z: float,
+          box: tuple[NDArray, NDArray] | None) -> bool:
+    """Return whether `path` meets the limits and stays in the box (1e-9 m slack)."""
+    if box is not None and (np.any(path < box[0] - 1e-9) or np.any(path > box[1] + 1e-9)):
+        return False
+    return check_limits(path, limits, floor_z).feasible
+
+
 def _join(trail: list[NDArray], pts: NDArray, arc: NDArray, s_here: float,
-          limits: FlightLimits, floor_z: float) -> NDArray | None:
+          limits: FlightLimits, floor_z: float,
+          box: tuple[NDArray, NDArray] | None) -> NDArray | None:
     """Return the trail joined to the plan's vertices, the first joint within the limits."""
     first = int(np.searchsorted(arc, s_here, side='right'))
     for j in range(first, min(first + JOINTS, len(pts))):
@@ -203,6 +220,6 @@ def _join(trail: list[NDArray], pts: NDArray, arc: NDArray, s_here: float,
         if j + 1 < len(pts) and arc[j] - s_here < arc[j + 1] - arc[j]:
             continue
         path = np.vstack(trail + [pts[j:]])
-        if check_limits(path, limits, floor_z).feasible:
+        if _fits(path, limits, floor_z, box):
             return path
     return None
