@@ -152,6 +152,9 @@ def test_the_first_odom_replans_the_next_track_and_off_track_replans():
     # In flight: 20 m along, plus 0.1 s at 20 m/s since the odom.
     assert fields['s_now'] == pytest.approx(22.0, abs=1e-9)
     assert np.array_equal(fields['flown'], line)
+    # A new goal is replanned in flight too (as fly does): the committed stretch first.
+    regoal = accept(s, 'goal_pose', pose([90, 90, 50]))
+    assert tracker.request_fields(regoal, t + 3 * 10**9)['s_now'] == pytest.approx(20.0)
     far = tracked(s, [30, 10 + ODOM_DRIFT_M + 1, 60], t + 4 * 10**9)
     assert tracker.trigger(far, t + 4 * 10**9) == 'off track by 6 m'
     assert tracker.request_fields(far, t + 4 * 10**9) == {'vehicle': far.vehicle}
@@ -159,10 +162,19 @@ def test_the_first_odom_replans_the_next_track_and_off_track_replans():
     tracker.answered(5)
     assert tracker.trigger(far, t + 4 * 10**9 + 9 * 10**8) is None
     assert tracker.trigger(far, t + 5 * 10**9) == 'off track by 6 m'
-    # Stale odometry is not planned from; near the goal the trajectory stands.
-    assert tracker.request_fields(s, t + 4 * 10**9 + 1) == {}
-    near = tracked(s, [98, 90, 61.5], t + 6 * 10**9)
-    assert tracker.request_fields(near, t + 6 * 10**9) is None
+    # Odometry that stopped on the trajectory: the vehicle is taken to fly it on; near the
+    # goal the trajectory stands.
+    fields = tracker.request_fields(s, t + 5 * 10**9)
+    assert fields['s_now'] == pytest.approx(60.0, abs=1e-9)
+    assert tracker.request_fields(s, t + 9 * 10**9) is None   # 140 m of 170.6 m along
+    near = tracked(s, [98, 90, 61.5], t + 8 * 10**9)
+    assert tracker.request_fields(near, t + 8 * 10**9) is None
+    assert 'flown' in tracker.request_fields(accept(near, 'goal_pose', pose([50, 90, 50])),
+                                             t + 8 * 10**9)
+    # Stale odometry off any trajectory flown is no start: plan from start.
+    assert tracker.request_fields(far, t + 5 * 10**9 + 1) == {}
+    assert FlightTracker().request_fields(s, t + 4 * 10**9 + 1) == {}
+    assert FlightTracker().request_fields(s, t + 4 * 10**9) == {'vehicle': s.vehicle}
 
 
 def test_refusals_are_counted_and_said_once_per_kind_of_reason():

@@ -12,14 +12,17 @@ streams at tens of hertz; a replan per message would swamp the planner. The rule
   rate), odometry only tracks. Any other odom only tracks: the node keeps the vehicle's
   state for the next plan.
 * **Every other input** that replans (threats, zones, terrain, goal, parameters) plans
-  from the vehicle when its odometry is fresh (at most :data:`ODOM_STALE_S` old): *in
-  flight* when the trajectory being flown was planned from the vehicle, its goal is the
-  goal now and the vehicle is on it (within ODOM_DRIFT_M): the shared replan step
-  (:mod:`threat_planner.core.flight.commit`) keeps the next ``commit_s`` of it from where
-  the vehicle is at t0 (its arc length at the odom, advanced at ``speed_mps`` to t0) and
-  replans from its end. Otherwise from the vehicle with its heading; without fresh
-  odometry from ``start``, as before. Within ``commit_s`` of the goal on an unchanged
-  goal, the trajectory stands: nothing is replanned.
+  from the vehicle. *In flight* when the trajectory being flown was planned from the
+  vehicle and the vehicle was on it at its last odom (within ODOM_DRIFT_M): the shared
+  replan step (:mod:`threat_planner.core.flight.commit`) keeps the next ``commit_s`` of
+  it from where the vehicle is at t0 (its arc length at the last odom, moved on at
+  ``speed_mps`` to t0: a vehicle whose odometry stopped is taken to fly its trajectory)
+  and replans from its end to the goal now (a new goal too, as ``threat-planner fly``
+  replans one: the committed stretch is flown first). Otherwise from the vehicle with its
+  heading when its odometry is at most :data:`ODOM_STALE_S` old, else from ``start`` as
+  before (a ``start`` message also ends planning from the vehicle until the next odom).
+  Within ``commit_s`` of the goal on an unchanged goal, the trajectory stands: nothing is
+  replanned.
 
 A refused odom (another frame, NaN, outside the bounds) is counted (``odom_rejected`` in
 every ``plan_info``, and ``inputs_rejected``); the node logs it and publishes an ERROR
@@ -44,7 +47,7 @@ __all__ = ['FlightTracker', 'Flown', 'MAX_CLOUD_SKEW_S', 'ODOM_DRIFT_M', 'ODOM_R
 
 #: The vehicle is off the trajectory it flies beyond this distance from it [m].
 ODOM_DRIFT_M = 5.0
-#: Odometry older than this at a plan request is not planned from [s].
+#: Odometry older than this at a plan request is no start of a plan from the vehicle [s].
 ODOM_STALE_S = 1.0
 #: Odometry asks for a replan at most this often [s] (ArduPilot's avoidance: 1 Hz).
 ODOM_REPLAN_S = 1.0
@@ -157,23 +160,24 @@ class FlightTracker:
     def request_fields(self, state, now_ns: int) -> Optional[dict]:
         """Return the flight fields of a plan request; None when nothing is to be planned.
 
-        Empty without fresh odometry (plan from ``start``); ``vehicle`` alone to plan
-        from the vehicle; with ``flown`` and ``s_now`` in flight (module docstring).
+        With ``flown`` and ``s_now`` in flight; ``vehicle`` alone to plan from the
+        vehicle; empty to plan from ``start`` (module docstring).
         """
         v = state.vehicle
-        if v is None or now_ns - v.received_ns > ODOM_STALE_S * 1e9:
+        if v is None:
             return {}
         f = self.flown
-        if f is None or not f.from_vehicle or not np.array_equal(f.goal, state.goal):
-            return {'vehicle': v}
-        s, drift = self._drift(f, v.position)
-        if drift > ODOM_DRIFT_M:
-            return {'vehicle': v}
-        cfg = state.settings.config
-        s_now = min(s + cfg.speed_mps * 1e-9 * max(now_ns - v.received_ns, 0), f.ref.length)
-        if f.ref.length - s_now <= cfg.speed_mps * cfg.commit_s:
-            return None
-        return {'vehicle': v, 'flown': f.ref.points, 's_now': s_now}
+        if f is not None and f.from_vehicle:
+            s, drift = self._drift(f, v.position)
+            if drift <= ODOM_DRIFT_M:
+                cfg = state.settings.config
+                s_now = min(s + cfg.speed_mps * 1e-9 * max(now_ns - v.received_ns, 0),
+                            f.ref.length)
+                if (f.ref.length - s_now <= cfg.speed_mps * cfg.commit_s
+                        and np.array_equal(f.goal, state.goal)):
+                    return None
+                return {'vehicle': v, 'flown': f.ref.points, 's_now': s_now}
+        return {'vehicle': v} if now_ns - v.received_ns <= ODOM_STALE_S * 1e9 else {}
 
     def requested(self, request) -> None:
         """Note a plan asked for: with the vehicle known, odometry only tracks until it is done."""

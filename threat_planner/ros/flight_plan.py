@@ -119,6 +119,9 @@ def plan_flight(request, warm_start: Optional[PlanResult] = None) -> FlightAnswe
     values['rounds'] = timed.rounds
     if request.reason:
         values['plan_reason'] = request.reason
+    if request.vehicle is not None:
+        values['odom_age_s'] = 1e-9 * (request.received_ns - request.vehicle.received_ns)
+        values['vehicle_speed_mps'] = request.vehicle.speed
     static = timed.result
     result = _as_published(static, points, times, joint, known, s.box, cfg)
     initial_times = times[joint] + point_times(static.initial_path, speed)
