@@ -120,3 +120,18 @@ def test_headings_from_vectors_and_angles():
                      ([1.0], 'expected')):
         with pytest.raises(InputError, match=f'start_heading: .*{msg}'):
             unit_heading(bad)
+
+
+def test_a_turn_in_that_would_leave_the_box_is_ranked_not_raised():
+    """Climbing at the box's ceiling: every pursuit leaves it, and none may be kept as
+    feasible; the least-bad path comes back (it used to raise ValueError: no limit was
+    broken, so the ranking of violations had nothing to rank)."""
+    box, field, _ = _crossing()
+    cfg = PlannerConfig()
+    start = np.array([100.0, 100.0, 99.9])
+    static = plan(field, start, [190.0, 180.0, 60.0], box, cfg)
+    entry = enter(static.path, unit_heading([200.0, 25.0]), field, box, cfg.w,
+                  FlightLimits.of(cfg))
+    inside = np.all(entry.points >= box.lo - 1e-9) and np.all(entry.points <= box.hi + 1e-9)
+    assert entry.feasible == (inside and check_limits(entry.points, FlightLimits.of(cfg),
+                                                      0.0).feasible)

@@ -149,8 +149,7 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
             joined = np.vstack([got.turned[:-1], rest.path[1:]])
             if _inside(joined, box) and check_limits(joined, limits, floor).feasible:
                 return Entry(joined, len(joined) - 1, True, math.degrees(turn))
-    best, best_excess = guess, _relative_excess(
-        check_limits(guess, limits, floor).violations, limits)
+    best, best_excess = guess, _excess(guess, limits, floor, box)
     changed = len(guess) - 1 - _tail_vertices(guess, pts)
     pitch = math.degrees(math.asin(float(np.clip(h[2], -1.0, 1.0))))
     hopeless = ((limits.climb_on and pitch > limits.max_climb_deg)
@@ -168,7 +167,7 @@ def enter(points: ArrayLike, heading: ArrayLike, threats: ThreatField, box: Box 
             check = check_limits(out, limits, floor)
             if check.feasible and _inside(out, box):
                 return Entry(out, k, True, math.degrees(turn))
-            excess = _relative_excess(check.violations, limits)
+            excess = _excess(out, limits, floor, box)
             if excess < best_excess:
                 best, best_excess, changed = out, excess, k
     return Entry(best, changed, False, math.degrees(turn))
@@ -279,7 +278,16 @@ def _relative_excess(violations: dict[str, float], limits: FlightLimits) -> floa
             'dive_deg': max(limits.max_dive_deg, 1.0),
             'turn_radius_m': limits.min_turn_radius_m,
             'altitude_m': max(limits.min_altitude_m, 1.0)}
-    return max(v / unit[k] for k, v in violations.items())
+    return max((v / unit[k] for k, v in violations.items()), default=0.0)
+
+
+def _excess(path: NDArray, limits: FlightLimits, floor: float, box: Box | None) -> float:
+    """Return how far `path` breaks the limits (relative) or leaves the box (in radii)."""
+    out = _relative_excess(check_limits(path, limits, floor).violations, limits)
+    if box is not None:
+        gone = max(float(np.max(box.lo - path)), float(np.max(path - box.hi)), 0.0)
+        out = max(out, gone / max(limits.min_turn_radius_m, 1.0))
+    return out
 
 
 def _inside(path: NDArray, box: Box | None) -> bool:
