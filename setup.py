@@ -122,6 +122,7 @@ setup(
             'planner_node = threat_planner.ros.entry:planner_node',
             'planner_lifecycle_node = threat_planner.ros.entry:planner_lifecycle_node',
             'threat_publisher = threat_planner.ros.publisher:main',
+            'sim_vehicle = threat_planner.ros.sim_vehicle:main',
             'threat_planner_demo = threat_planner.cli.demo:main',
         ],
     },

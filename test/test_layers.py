@@ -18,6 +18,8 @@ ROS_FREE = [
     'threat_planner.core.geo.dem',
     'threat_planner.core.flight.commit',
     'threat_planner.flight.fly',
+    'threat_planner.flight.follow',
+    'threat_planner.flight.playback',
     'threat_planner.export.thin',
     'threat_planner.export.qgc',
     'threat_planner.cli',

@@ -90,16 +90,17 @@ def test_threat_drift_is_deterministic_and_stays_in_bounds():
     np.testing.assert_array_equal(still.at(10.0, 1.0), p0)
 
 
-def test_launch_file_compiles(tmp_path):
-    py_compile.compile(str(REPO / 'launch' / 'planner.launch.py'),
-                       cfile=str(tmp_path / 'planner.launch.pyc'), doraise=True)
+@pytest.mark.parametrize('name', ['planner', 'flight'])
+def test_launch_file_compiles(tmp_path, name):
+    py_compile.compile(str(REPO / 'launch' / f'{name}.launch.py'),
+                       cfile=str(tmp_path / f'{name}.launch.pyc'), doraise=True)
     try:
         import launch_ros  # noqa: F401
     except ImportError:
         pytest.skip('launch_ros is not installed: only compiled')
     import importlib.util
-    spec = importlib.util.spec_from_file_location('planner_launch',
-                                                  REPO / 'launch' / 'planner.launch.py')
+    spec = importlib.util.spec_from_file_location(f'{name}_launch',
+                                                  REPO / 'launch' / f'{name}.launch.py')
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert module.generate_launch_description().entities

@@ -30,16 +30,13 @@ from threat_planner.core.optimise.limits import check_limits, FlightLimits
 from threat_planner.core.world.airspace import Zone
 from threat_planner.errors import InputError, PlanningError, ThreatPlannerError
 from threat_planner.flight.events import apply_event, Event
+from threat_planner.flight.follow import follow_step
 from threat_planner.flight.vehicle import PointMass
 
 __all__ = ['FlightReport', 'fly', 'scenario_timeline']
 
 #: Simulation step [s] (the flown path's spacing in time; the issue asks for <= 0.1 s).
 DT = 0.05
-#: The vehicle aims this many turn radii ahead on the path (and at least two steps):
-#: at 1.0, 4 of 8 bench flights missed the goal (tracking 38-46 m off after a miss), at
-#: 0.5 none (tracking within 0.9 m).
-LOOK = 0.5
 #: A flight has reached its goal when it passes this close to it [m].
 GOAL_TOLERANCE = 1.0
 
@@ -172,14 +169,8 @@ class _Flight:
 
     def step(self) -> float:
         """Fly one step; return the distance from the path after it [m]."""
-        v = self.vehicle
-        reach = 3 * self.speed * self.dt + 1.0
-        self.s_now = self.ref.project(v.position, max(self.s_now - 1.0, 0.0),
-                                      self.s_now + reach)
-        look = max(LOOK * self.cfg.min_turn_radius_m, 2 * self.speed * self.dt)
-        v.step(self.ref.ahead(self.s_now + look), self.dt)
-        s = self.ref.project(v.position, max(self.s_now - 1.0, 0.0), self.s_now + reach)
-        return float(np.linalg.norm(self.ref.at(s) - v.position))
+        self.s_now, off = follow_step(self.vehicle, self.ref, self.s_now, self.dt)
+        return off
 
 
 def _lethal_entries(path: NDArray, times: NDArray, truth: ThreatTimeline) -> list[dict]:

@@ -13,6 +13,15 @@ geometry_msgs/PoseArray, with ``use_pose_array:=true``), ``start`` and ``goal_po
   random direction (reflected at the bounds), ``sinusoid`` swings each threat along a random
   axis with period ``drift_period`` [s] and peak speed ``drift``.
 
+* ``events_file`` (default '': none): an events file (the layout of ``threat-planner fly
+  --events``, :mod:`threat_planner.flight.events`) played on the node's clock from its
+  start: at each event's time the picture is republished as it is then, with every
+  threat where it is at that time (a threat with a velocity, the scenario's or an
+  event's, is republished at 2 Hz as it moves, and a cloud in which one moves carries
+  every threat's ``vx vy vz``); a goal event publishes the new ``goal_pose``. Zone
+  events are not played (this node publishes no zones). A bad events file is refused
+  before anything is published: one line naming the field, exit code 2.
+
 Start and goal are published at start-up and again whenever a new subscriber appears: a
 planner subscribes to them volatile (so that RViz's pose tools work) and would otherwise
 miss them if it starts after this node. Threats need no such help: the planner subscribes
@@ -34,6 +43,7 @@ from sensor_msgs.msg import PointCloud2
 
 from threat_planner.core.inputs.scenario import load_scenario, Scenario
 from threat_planner.errors import InputError
+from threat_planner.flight.playback import Playback
 from threat_planner.ros.conversions import pointcloud2_from_threats
 from threat_planner.ros.process import run_node
 
@@ -46,6 +56,16 @@ LATCHED = QoSProfile(reliability=ReliabilityPolicy.RELIABLE,
                      history=HistoryPolicy.KEEP_LAST, depth=1)
 # How often to look for new start/goal subscribers [s].
 _MATCH_POLL_S = 0.2
+#: How often events are looked for while an events file plays [s].
+EVENT_POLL_S = 0.05
+#: How often a moving threat is republished while an events file plays [s] (2 Hz).
+MOVING_PERIOD_S = 0.5
+#: main()'s exit code for a bad events file.
+EXIT_BAD_EVENTS = 2
+
+
+class _EventsFileError(InputError):
+    """A bad events file (main() exits EXIT_BAD_EVENTS)."""
 
 
 class ThreatDrift:
@@ -152,6 +172,9 @@ class ThreatPublisher(Node):
                         "then the planner's default_intensity)"))
         self.declare_parameter('frame_id', '', ParameterDescriptor(
             description="Frame of the messages; '' = the scenario's frame_id"))
+        self.declare_parameter('events_file', '', ParameterDescriptor(
+            description="Events file played from the node's start (threat-planner fly "
+                        "--events layout); '' = none"))
         self.declare_parameter('namespaces', [''], ParameterDescriptor(
             description="Publish to each of these namespaces (['/uav1', '/uav2']); "
                         "[''] = this node's own namespace"))
@@ -160,6 +183,8 @@ class ThreatPublisher(Node):
         if not path:
             raise InputError('scenario: give a scenario file with -p scenario:=FILE')
         self._scenario: Scenario = load_scenario(path)
+        self._playback = self._load_events(self.get_parameter('events_file').value)
+        self._t0, self._published_t = self.get_clock().now(), 0.0    # the events' clock
         self._frame = self.get_parameter('frame_id').value or self._scenario.frame_id
         self._rate = float(self.get_parameter('rate').value)
         self._use_poses = bool(self.get_parameter('use_pose_array').value)
@@ -171,6 +196,9 @@ class ThreatPublisher(Node):
                                   int(self.get_parameter('seed').value))
         if drift > 0.0 and self._rate == 0.0:
             self.get_logger().warning('drift is ignored with rate 0 (published once)')
+        if drift > 0.0 and self._playback is not None:
+            self.get_logger().warning('drift is ignored with an events file (it moves the '
+                                      'threats)')
         self._tick = 0
 
         # One publisher set per namespace: a fleet of planners fed from one scenario.
@@ -194,11 +222,65 @@ class ThreatPublisher(Node):
         self.create_timer(_MATCH_POLL_S, self._republish_to_new_subscribers)
         if self._rate > 0.0:
             self.create_timer(1.0 / self._rate, self._publish_threats)
+        if self._playback is not None:
+            self.create_timer(EVENT_POLL_S, self._play)
         self.get_logger().info(
             f'{self._scenario.name}: {len(self._scenario.threats)} threats on '
             f'{", ".join(p.topic_name for p in self._pubs_threats)} in frame {self._frame}, '
             + (f'{self._rate:g} Hz, drift {drift:g} m/s' if self._rate > 0.0
                else 'published once (latched)'))
+
+    def _load_events(self, path: str) -> Playback | None:
+        if not path:
+            return None
+        try:
+            playback = Playback.from_file(self._scenario, path)
+        except InputError as exc:
+            raise _EventsFileError(f'events_file {path}: {exc}') from None
+        zones = sum(e.kind == 'add_zone' for e in playback.events)
+        if zones:
+            self.get_logger().warning(f'events_file: {zones} add_zone event(s) not played '
+                                      '(this node publishes no zones)')
+        self.get_logger().info(f'events_file {path}: {len(playback.events)} events')
+        return playback
+
+    def _elapsed(self) -> float:
+        return (self.get_clock().now() - self._t0).nanoseconds * 1e-9
+
+    def _play(self) -> None:
+        """Apply the events due now; republish what they changed, and moving threats."""
+        t = self._elapsed()
+        changed = False
+        for event, goal in self._playback.due(t):
+            self.get_logger().info(f'event: {event.describe()}')
+            if goal is not None:
+                self._pose_pubs = [(kind, pub, goal if kind == 'goal' else xyz)
+                                   for kind, pub, xyz in self._pose_pubs]
+                for kind, pub, xyz in self._pose_pubs:
+                    if kind == 'goal':
+                        self._publish_pose(pub, xyz)
+            elif event.kind != 'add_zone':
+                changed = True
+        if changed or (self._playback.moving(t) and t - self._published_t >= MOVING_PERIOD_S):
+            self._publish_threats()
+
+    def _picture(self) -> tuple[NDArray, NDArray, NDArray | None]:
+        """Return the threats to publish: positions (N, 3), intensities (N,), velocities.
+
+        The velocities (N, 3) [m/s] are those of an events file's picture in which a
+        threat moves (the cloud's ``vx vy vz``), else None (a still picture).
+        """
+        if self._playback is not None:
+            t = self._elapsed()
+            self._published_t = t
+            snap = self._playback.picture(t)
+            moving = bool(np.any(snap.velocities != 0.0))
+            return (snap.field.positions, snap.field.intensities,
+                    snap.velocities if moving else None)
+        dt = 1.0 / self._rate if self._rate > 0.0 else 0.0
+        positions = self._drift.at(self._tick * dt, dt if self._tick else 0.0)
+        self._tick += 1
+        return positions, self._scenario.threats.intensities, None
 
     def _stamp(self):
         return self.get_clock().now().to_msg()
@@ -213,9 +295,7 @@ class ThreatPublisher(Node):
         publisher.publish(msg)
 
     def _publish_threats(self) -> None:
-        dt = 1.0 / self._rate if self._rate > 0.0 else 0.0
-        positions = self._drift.at(self._tick * dt, dt if self._tick else 0.0)
-        self._tick += 1
+        positions, intensities, velocities = self._picture()
         stamp = self._stamp()
         if self._use_poses:
             msg = PoseArray()
@@ -226,8 +306,8 @@ class ThreatPublisher(Node):
                 pose.position.x, pose.position.y, pose.position.z = x, y, z
                 pose.orientation.w = 1.0
         else:
-            msg = pointcloud2_from_threats(positions, self._scenario.threats.intensities,
-                                           self._frame, stamp)
+            msg = pointcloud2_from_threats(positions, intensities, self._frame, stamp,
+                                           velocities)
         for pub in self._pubs_threats:
             pub.publish(msg)
 
@@ -250,10 +330,20 @@ def main(args: Optional[list[str]] = None) -> int:
     Returns
     -------
     int
-        0 after a clean shutdown, 1 if the scenario or a parameter was refused.
+        0 after a clean shutdown, 1 if the scenario or a parameter was refused,
+        EXIT_BAD_EVENTS (2) if the events file was.
 
     """
-    return run_node(ThreatPublisher, NODE_NAME, args)
+    refused = []
+
+    def factory() -> ThreatPublisher:
+        try:
+            return ThreatPublisher()
+        except _EventsFileError:
+            refused.append(True)
+            raise
+    code = run_node(factory, NODE_NAME, args)
+    return EXIT_BAD_EVENTS if code == 1 and refused else code
 
 
 if __name__ == '__main__':
