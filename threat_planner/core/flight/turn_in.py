@@ -64,6 +64,12 @@ def _turn_toward(v: NDArray, d: NDArray, most: float) -> NDArray:
     return math.cos(most) * v + math.sin(most) * side
 
 
+def _yaw(v: NDArray, angle: float) -> NDArray:
+    """Rotate `v` about the vertical by `angle` [rad] (positive: to the left)."""
+    c, s_ = math.cos(angle), math.sin(angle)
+    return np.array([c * v[0] - s_ * v[1], s_ * v[0] + c * v[1], v[2]])
+
+
 def _hold_pitch(v: NDArray, climb_deg: float, dive_deg: float) -> NDArray:
     h = math.hypot(v[0], v[1])
     pitch = math.degrees(math.atan2(v[2], h))
@@ -128,17 +134,24 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
 
     """
     first = None
-    for look_z in LOOK_Z:
-        got = _pursue(points, heading, limits, floor_z, look_z, box)
-        if got.feasible:
-            return got
-        first = first or got
+    # The pursuit's own way round first; then turning left, then right, at the full rate
+    # until the plan is ahead (a U-turn at a wall must turn away from it).
+    for side in (0, 1, -1):
+        for look_z in LOOK_Z:
+            got = _pursue(points, heading, limits, floor_z, look_z, box, side)
+            if got.feasible:
+                return got
+            first = first or got
     return first
 
 
 def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: float,
-            look_z: float, box: tuple[NDArray, NDArray] | None) -> Pursuit:
-    """Fly one pursuit, aiming in height `look_z` turn radii ahead."""
+            look_z: float, box: tuple[NDArray, NDArray] | None, side: int = 0) -> Pursuit:
+    """Fly one pursuit, aiming in height `look_z` turn radii ahead.
+
+    With `side` +1 (-1) it first turns left (right) level at the full rate for as long
+    as the plan's aim point is behind it.
+    """
     pts = np.asarray(points, float)
     radius = max(limits.min_turn_radius_m, 1e-3 * float(np.linalg.norm(pts[-1] - pts[0])))
     step = STEP * radius
@@ -167,10 +180,10 @@ def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: fl
         dive_now = max(-math.asin(float(np.clip(v[2], -1.0, 1.0))), 0.0)
         pull_up = p[2] - low <= MARGIN * radius * (1.0 - math.cos(dive_now)) + 2 * step
         if box is not None:
-            # Near a wall, aim inside it: where the vehicle would be a turn radius on.
-            ahead = p + radius * v
-            if np.any(ahead < box[0]) or np.any(ahead > box[1]):
-                aim = np.clip(aim, box[0] + radius, box[1] - radius)
+            # Past the goal the aim runs on along the last segment: keep it in the box.
+            # (Held a turn radius inside, it kept the pursuit 10 m off a plan along a
+            # wall, never joining it.)
+            aim = np.clip(aim, box[0], box[1])
         tangent = _unit(dense[min(i + 1, len(dense) - 1)] - dense[max(i - 1, 0)])
         if (len(trail) > 1 and float(np.linalg.norm(p - dense[i])) <= ON_PATH * radius
                 and float(v @ tangent) >= cos_aligned and s_here < length - step):
@@ -186,6 +199,8 @@ def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: fl
         if len(trail) > 1 and pull_up and v[2] < 0:   # in its vertical plane, as tight
             flat = _unit(np.array([v[0], v[1], 0.0]))
             v = _turn_toward(v, flat if np.any(flat) else v, most)
+        elif len(trail) > 1 and side and float(v @ _unit(aim - p)) < 0.0:
+            v = _hold_pitch(_yaw(v, side * most), climb, dive)
         elif len(trail) > 1:     # the first step goes along the heading
             v = _hold_pitch(_turn_toward(v, _unit(aim - p), most), climb, dive)
         p = p + step * v
