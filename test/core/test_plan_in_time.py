@@ -69,7 +69,7 @@ def test_the_plan_leaves_along_the_heading_within_the_limits(yaw, pitch):
     start = np.array([100.0, 100.0, 50.0])
     static = plan(field, start, [190.0, 180.0, 60.0], box, cfg)
     h = unit_heading([yaw, pitch])
-    entry = enter(static.path, h, field, box, cfg.w, FlightLimits.of(cfg))
+    entry = enter(static.path, h, box, FlightLimits.of(cfg))
     first = entry.points[1] - entry.points[0]
     assert np.linalg.norm(np.cross(first / np.linalg.norm(first), h)) < 1e-9
     assert first @ h > 0
@@ -92,7 +92,7 @@ def test_the_turn_in_is_flown_at_the_turn_radius_at_most():
     start = np.array([100.0, 100.0, 50.0])
     static = plan(field, start, [190.0, 180.0, 60.0], box, cfg)
     back = -(static.path[1] - static.path[0])
-    entry = enter(static.path, back / np.linalg.norm(back), field, box, cfg.w,
+    entry = enter(static.path, back / np.linalg.norm(back), box,
                   FlightLimits.of(cfg))
     assert entry.feasible and entry.turn_deg == pytest.approx(180.0, abs=1e-6)
     radii = turn_radii(entry.points)
@@ -106,7 +106,7 @@ def test_a_plan_already_on_the_heading_is_kept():
     cfg = PlannerConfig()
     static = plan(field, [10.0, 100, 50], [190.0, 100, 50], box, cfg)
     h = static.path[1] - static.path[0]
-    entry = enter(static.path, h / np.linalg.norm(h), field, box, cfg.w,
+    entry = enter(static.path, h / np.linalg.norm(h), box,
                   FlightLimits.of(cfg))
     assert entry.changed == 0 and np.array_equal(entry.points, static.path)
 
@@ -130,7 +130,7 @@ def test_a_turn_in_that_would_leave_the_box_is_ranked_not_raised():
     cfg = PlannerConfig()
     start = np.array([100.0, 100.0, 99.9])
     static = plan(field, start, [190.0, 180.0, 60.0], box, cfg)
-    entry = enter(static.path, unit_heading([200.0, 25.0]), field, box, cfg.w,
+    entry = enter(static.path, unit_heading([200.0, 25.0]), box,
                   FlightLimits.of(cfg))
     inside = np.all(entry.points >= box.lo - 1e-9) and np.all(entry.points <= box.hi + 1e-9)
     assert entry.feasible == (inside and check_limits(entry.points, FlightLimits.of(cfg),

@@ -211,8 +211,7 @@ def enter_plan(heading: NDArray, scenario: Scenario, cfg: PlannerConfig,
     from threat_planner.core.optimise.smoothing import check_angles
     box, air = scenario.box, scenario.airspace
     limits = FlightLimits.of(cfg)
-    entry = enter(result.path, heading, scenario.threats, box if cfg.confine_to_box else None,
-                  cfg.w, limits)
+    entry = enter(result.path, heading, box if cfg.confine_to_box else None, limits)
     pts = entry.points
     if air.masking:
         from threat_planner.core.cost.masking import masked_cost

@@ -191,13 +191,12 @@ def plan_in_time(known: ThreatTimeline, start: ArrayLike, goal: ArrayLike, box: 
         warm_start = result
     if heading is not None:
         # Onto the heading once, for the round kept: a turn-in changes only the first
-        # vertices, and each one costs an SLSQP (tens of milliseconds).
+        # vertices (a replan from where the pursuit turned may follow).
         def again(point: NDArray) -> NDArray:
             return _plan_static(best_field, point, g, box, config, zones, best_lethal,
                                 terrain, None).path
 
-        entered = enter(best.points, heading, best_field,
-                        box if config.confine_to_box else None, config.w,
+        entered = enter(best.points, heading, box if config.confine_to_box else None,
                         FlightLimits.of(config), replan=again)
         best.points, best.entry = entered.points, entered
         best.times = _times(best.points, speed, t0)

@@ -4,14 +4,12 @@ From the start ``s`` along the heading ``h``, a point moves in steps of ``STEP``
 radii, turning toward a point ``LOOK`` turn radii ahead on the plan at most as tightly as
 the radius allows (with a margin, so that the polyline of its positions passes the fillet
 rule of :mod:`threat_planner.core.optimise.limits`) and with its flight-path angle held
-within the climb and dive limits; near the floor (plus ``min_altitude_m``) it pulls up
-in time. Once it flies along the plan (within ``ON_PATH`` turn
-radii of it, and its direction within ``ALIGNED_DEG``), the plan's own vertices take
-over at the first joint whose path keeps every limit; failing all of them the
-pursuit goes on, through the goal where the last step into it keeps the limits (else it
-turns round and comes back). :func:`pursue_plan` returns the joined path; the entry
-(:mod:`.entry`) starts its optimisation from it and keeps it when the optimisation does
-not end within the limits.
+within the climb and dive limits; near the floor (plus ``min_altitude_m``) it pulls up in
+time, and near the ceiling of the box it levels off. Once it flies along the plan (within
+``ON_PATH`` turn radii of it, and its direction within ``ALIGNED_DEG``), the plan's own
+vertices take over at the first joint whose path keeps every limit and the box; failing
+all of them the pursuit goes on, through the goal where the last step into it keeps the
+limits. :func:`pursue_plan` returns the joined path (:mod:`.entry` uses it).
 """
 
 from __future__ import annotations
@@ -177,8 +175,12 @@ def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: fl
         aim = _along(pts, arc, last_dir, s_here + LOOK * radius)
         aim[2] = _along(pts, arc, last_dir, s_here + look_z * radius)[2]
         # Pull up in time: levelling off from a dive at angle a takes R (1 - cos a).
-        dive_now = max(-math.asin(float(np.clip(v[2], -1.0, 1.0))), 0.0)
-        pull_up = p[2] - low <= MARGIN * radius * (1.0 - math.cos(dive_now)) + 2 * step
+        pitch_now = math.asin(float(np.clip(v[2], -1.0, 1.0)))
+        pull_up = (v[2] < 0 and p[2] - low
+                   <= MARGIN * radius * (1.0 - math.cos(pitch_now)) + 2 * step)
+        # ...and level off below the ceiling of the box likewise.
+        push_down = (box is not None and v[2] > 0 and box[1][2] - p[2]
+                     <= MARGIN * radius * (1.0 - math.cos(pitch_now)) + 2 * step)
         if box is not None:
             # Past the goal the aim runs on along the last segment: keep it in the box.
             # (Held a turn radius inside, it kept the pursuit 10 m off a plan along a
@@ -196,7 +198,7 @@ def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: fl
             path = np.vstack(trail + [pts[-1]])   # at the goal: ends here if it may
             if _fits(path, limits, floor_z, box):
                 return Pursuit(path, True, turned, turned_heading)
-        if len(trail) > 1 and pull_up and v[2] < 0:   # in its vertical plane, as tight
+        if len(trail) > 1 and (pull_up or push_down):   # in its vertical plane, as tight
             flat = _unit(np.array([v[0], v[1], 0.0]))
             v = _turn_toward(v, flat if np.any(flat) else v, most)
         elif len(trail) > 1 and side and float(v @ _unit(aim - p)) < 0.0:
