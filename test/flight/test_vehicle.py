@@ -67,7 +67,8 @@ targets = st.lists(st.tuples(point, st.integers(1, 60)), min_size=1, max_size=6)
 def test_it_never_turns_tighter_nor_climbs_or_dives_steeper_than_its_limits(lim, goals):
     """Any targets; limits up to STEEPEST, a step turning at most MOST_PER_STEP.
 
-    Steeper limits and coarser steps: the xfail cases below.
+    Steeper limits and coarser steps: the cases below (they broke the limits until the
+    turn kept to the flight-path band).
     """
     assume(lim['speed'] * lim['dt'] / lim['radius'] <= MOST_PER_STEP)
     pitch = lim['pitch_frac'] * (lim['climb'] if lim['pitch_frac'] > 0 else lim['dive'])
@@ -116,20 +117,12 @@ def test_without_limits_it_flies_straight_at_the_target():
     assert v.position == pytest.approx([0.0, 0.0, -1.0])
 
 
-@pytest.mark.xfail(strict=True, reason='PointMass._clamp_pitch keeps the azimuth of the '
-                   'turned heading: the turn goes over the pole on its great circle and the '
-                   'clamp back onto the limit adds to it; at the 80 deg limit one step turns '
-                   '4.5 % more than speed dt / R (a 9.57 m circle for 10 m), 0.18 % at 60')
 def test_a_turn_at_a_steep_climb_limit_keeps_the_turn_radius():
     v = PointMass(np.zeros(3), _heading(0.0, 80.0), 20.0, 10.0, 80.0, 80.0)
     pos, head = _fly(v, [(1000.0 * _heading(122.0, 20.0), 3)], 0.05)
     _check_limits(pos, head, 20.0, 0.05, 10.0, 80.0, 80.0)
 
 
-@pytest.mark.xfail(strict=True, reason='PointMass._clamp_pitch takes the horizontal '
-                   'direction of the turned heading: past the vertical it reverses it '
-                   '(175 deg in one step of 93 deg most), at the vertical it has none and '
-                   'the heading loses length (the step flies 0.14 m, not 1.63 m)')
 @pytest.mark.parametrize('target', [[-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
 def test_a_step_that_turns_past_the_vertical_keeps_the_limits(target):
     """A coarse step (26 m/s x 0.0625 s on a 1 m radius: 93 deg) at a target below."""
@@ -139,9 +132,6 @@ def test_a_step_that_turns_past_the_vertical_keeps_the_limits(target):
     _check_limits(pos, head, 26.0, 0.0625, 1.0, 5.0, 5.0)
 
 
-@pytest.mark.xfail(strict=True, reason='with no horizontal direction to keep the clamp '
-                   'gives heading (0, 0, -sin 30 deg): the vehicle drops straight down (a '
-                   '90 deg dive past the 30 deg limit) at half its speed')
 def test_without_a_turn_limit_a_target_straight_below_keeps_the_speed():
     """No turn limit, a dive limit: the clamp must still give a unit heading."""
     v = PointMass(np.array([0.0, 0.0, 100.0]), np.array([1.0, 0.0, 0.0]), 20.0, 0.0, 30.0,

@@ -4,7 +4,9 @@ Each step it steers its velocity towards a look-ahead point of the path it follo
 pursuit), turning at most ``speed / R * dt`` [rad] (R the turn radius limit, widened by
 TURN_MARGIN so that the polyline of its positions passes the fillet rule of
 :mod:`threat_planner.core.optimise.limits`, whose sampled circle of radius R reads a
-hair below R), with its flight-path angle held within the climb and dive limits.
+hair below R), with its flight-path angle held within the climb and dive limits: it
+aims at the target's direction clamped to them, along the great circle where that stays
+within them, else about the vertical at its flight-path angle.
 """
 
 from __future__ import annotations
@@ -57,37 +59,55 @@ class PointMass:
         want = _unit(np.asarray(target, float) - self.position)
         if not np.any(want):
             want = self.heading
-        h = self._turn(self.heading, want, dt)
-        h = self._clamp_pitch(h, want)
-        self.heading = h
-        self.position = self.position + self.speed * dt * h
+        self.heading = self._turn(self.heading, self._in_band(want, self.heading), dt)
+        self.position = self.position + self.speed * dt * self.heading
+
+    def _band(self) -> tuple[float, float]:
+        return -math.radians(self.max_dive_deg), math.radians(self.max_climb_deg)
+
+    def _in_band(self, d: NDArray, h: NDArray) -> NDArray:
+        """Return `d` with its flight-path angle clamped to the limits.
+
+        Its azimuth is kept (the current heading's where `d` is vertical).
+        """
+        lo, hi = self._band()
+        flat = d[:2] if math.hypot(d[0], d[1]) > 1e-12 else h[:2]
+        if math.hypot(flat[0], flat[1]) <= 1e-12:
+            flat = np.array([1.0, 0.0])
+        flat = flat / math.hypot(flat[0], flat[1])
+        pitch = min(max(math.atan2(d[2], math.hypot(d[0], d[1])), lo), hi)
+        return np.array([flat[0] * math.cos(pitch), flat[1] * math.cos(pitch),
+                         math.sin(pitch)])
 
     def _turn(self, h: NDArray, want: NDArray, dt: float) -> NDArray:
+        """Turn unit `h` towards `want` by at most ``speed dt / (R TURN_MARGIN)``.
+
+        `want` is within the climb and dive limits, and so is every heading. Along the great circle first; where that circle bulges past a limit (a turn at a
+        steep climb limit goes over the pole), at the flight-path angle the heading
+        has, about the vertical, by the angle that turns it as far.
+        """
         if self.min_turn_radius_m <= 0:
             return want
         most = self.speed * dt / (self.min_turn_radius_m * TURN_MARGIN)
         angle = math.acos(float(np.clip(h @ want, -1.0, 1.0)))
         if angle <= most:
             return want
-        axis = np.cross(h, want)
-        if np.linalg.norm(axis) < 1e-12:   # straight behind: turn about the vertical
-            axis = np.cross(h, [0.0, 0.0, 1.0])
-            if np.linalg.norm(axis) < 1e-12:
-                axis = np.array([1.0, 0.0, 0.0])
-            axis = np.cross(axis, h)
-        axis = _unit(axis)
-        # Rodrigues' rotation of h about axis by `most`.
-        return _unit(h * math.cos(most) + np.cross(axis, h) * math.sin(most)
-                     + axis * (axis @ h) * (1 - math.cos(most)))
-
-    def _clamp_pitch(self, h: NDArray, want: NDArray) -> NDArray:
-        horizontal = math.hypot(h[0], h[1])
-        pitch = math.atan2(h[2], horizontal)
-        lo, hi = -math.radians(self.max_dive_deg), math.radians(self.max_climb_deg)
-        if lo <= pitch <= hi:
-            return h
-        pitch = min(max(pitch, lo), hi)
-        flat = h[:2] if horizontal > 1e-12 else want[:2]
-        flat = flat / max(float(np.linalg.norm(flat)), 1e-300)
-        return np.array([flat[0] * math.cos(pitch), flat[1] * math.cos(pitch),
-                         math.sin(pitch)])
+        side = want - (h @ want) * h
+        if np.linalg.norm(side) < 1e-12:   # straight behind: turn level, either way
+            side = np.cross([0.0, 0.0, 1.0], h)
+            if np.linalg.norm(side) < 1e-12:
+                side = np.array([1.0, 0.0, 0.0])
+        side = _unit(side - (side @ h) * h)
+        turned = math.cos(most) * h + math.sin(most) * side
+        lo, hi = self._band()
+        if lo - 1e-12 <= math.asin(float(np.clip(turned[2], -1.0, 1.0))) <= hi + 1e-12:
+            return turned
+        pitch = min(max(math.asin(float(np.clip(h[2], -1.0, 1.0))), lo), hi)
+        c = math.cos(pitch)
+        # Turning about the vertical by b at flight-path angle p moves the heading by
+        # 2 asin(cos p sin(b / 2)): the most b within `most`, and no further than `want`.
+        b = math.pi if c <= math.sin(most / 2) else 2 * math.asin(math.sin(most / 2) / c)
+        az_h, az_w = math.atan2(h[1], h[0]), math.atan2(want[1], want[0])
+        gap = (az_w - az_h + math.pi) % (2 * math.pi) - math.pi
+        az = az_h + math.copysign(min(b, abs(gap)), gap)
+        return np.array([c * math.cos(az), c * math.sin(az), math.sin(pitch)])
