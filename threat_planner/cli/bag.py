@@ -1,8 +1,26 @@
-"""Command line: ``threat-planner bag repair IN [OUT]``."""
+"""Command line: ``threat-planner bag repair IN [OUT]``, and ``replay`` of a flight bag."""
 
 from __future__ import annotations
 
 import argparse
+
+from threat_planner.errors import InputError
+
+
+def replay_flight_bag(args: argparse.Namespace, changes: dict) -> int:
+    """Replay a flight bag (``fly --record``): one line per plan and a verdict; 0 or 1."""
+    from threat_planner.ros.recording.flight_replay import replay_flight
+    if args.live:
+        raise InputError(f'--live: {args.bag} is a flight recording (fly --record); '
+                         'replay it without --live')
+    report = replay_flight(args.bag, tolerance=args.tolerance, overrides=changes,
+                           tolerant=args.tolerant)
+    for line in report.lines():
+        print(line)
+    if args.report:
+        from threat_planner.cli.options import output_file
+        output_file(args.report).write_text(report.markdown())
+    return 0 if report.ok else 1
 
 
 def _cmd_repair(args: argparse.Namespace) -> int:

@@ -7,6 +7,10 @@ against the plan made with hindsight, the largest jump of the commanded path and
 limits met along the flown path; ``--json`` writes :meth:`FlightReport.as_dict` (every
 non-finite number as null), ``--plot`` a top and a side view (:mod:`.flight_figure`).
 
+``--record flight.mcap`` records the flight as a bag
+(:mod:`threat_planner.ros.recording.flight_record`) that ``threat-planner replay`` flies
+again.
+
 ``--start-heading`` (``fly`` and ``plan``) is the direction the vehicle flies at the start:
 three numbers (a vector) or two (yaw and pitch [deg]). ``plan`` then brings its path onto
 it with :func:`threat_planner.core.flight.entry.enter` and reports that path's exact J.
@@ -71,6 +75,13 @@ def add_fly_command(sub, planner_options) -> None:
                    help='write the flight (flown path and times, replans, costs) as JSON')
     p.add_argument('--plot', metavar='flight.png',
                    help='write a top view and a side view of the flight (PNG)')
+    p.add_argument('--record', metavar='flight.mcap',
+                   help='record the flight to MCAP as the planner node, threat_publisher '
+                        'and sim_vehicle would (threats, events, path, plan_info, odom) '
+                        'with its setup; threat-planner replay flies it again (docs/bags.md)')
+    p.add_argument('--record-no-latency', action='store_true',
+                   help='leave the wall-clock replan latencies out of the recording: the '
+                        'same flight then records to the same bytes')
     p.set_defaults(func=_cmd_fly)
 
 
@@ -90,10 +101,19 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     cfg = config_from(args, scenario)
     heading = start_heading(args)
     events = _events(args.events)
-    report = fly(scenario, events, cfg, cfg.speed_mps, commit_s=cfg.commit_s,
-                 heading=heading)
+    recorded = None
+    if args.record:
+        from threat_planner.ros.recording.flight_record import record_flight
+        report, recorded = record_flight(scenario, events, cfg, cfg.speed_mps, args.record,
+                                         latency=not args.record_no_latency,
+                                         commit_s=cfg.commit_s, heading=heading)
+    else:
+        report = fly(scenario, events, cfg, cfg.speed_mps, commit_s=cfg.commit_s,
+                     heading=heading)
     for line in flight_lines(scenario, cfg, events, report):
         print(line)
+    if recorded is not None:
+        print(f'  recorded: {recorded}')
     if args.json:
         data = {'scenario': scenario.name, 'events_file': str(args.events),
                 'commit_s': cfg.commit_s, 'w': cfg.w,

@@ -113,7 +113,11 @@ def _cmd_paper(args: argparse.Namespace) -> int:
 def _cmd_replay(args: argparse.Namespace) -> int:
     from threat_planner.ros.recording.live import play_live
     from threat_planner.ros.recording.replay import load_bag, replay_bag
+    from threat_planner.ros.recording.flight_record import is_flight_bag
     changes = overrides(args)
+    if is_flight_bag(args.bag, tolerant=args.tolerant):
+        from threat_planner.cli.bag import replay_flight_bag
+        return replay_flight_bag(args, changes)
     bag = load_bag(args.bag, tolerant=args.tolerant)
     if args.live:
         bar = ProgressBar('live')
@@ -186,8 +190,9 @@ def build_parser() -> argparse.ArgumentParser:
         'replay', help='re-plan a recorded run and compare with the recorded plans',
         description='Re-plan every input state of a recording (planner node or plan '
                     '--record) with its recorded parameters and compare with the recorded '
-                    'outputs. Exit status: 0 all within tolerance, 1 a plan differs, 2 bad '
-                    'recording or option.')
+                    'outputs; fly a flight recording (fly --record) again and compare each '
+                    'replan, J_flown and reached_goal. Exit status: 0 all within '
+                    'tolerance, 1 a plan differs, 2 bad recording or option.')
     p_replay.add_argument('bag', help='MCAP file or rosbag2 bag directory')
     p_replay.add_argument('--tolerance', type=float, default=1e-6,
                           help='largest path point distance [m] and relative J difference '

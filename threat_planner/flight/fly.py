@@ -9,6 +9,17 @@ from the end of that stretch at the time the vehicle will be there
 A replan that fails (a start inside a new zone, no route) keeps the last good plan and
 says so. The flown path is scored with the exact timed J against the true threats; so is
 the plan made with hindsight (every event known at t = 0, to the final goal).
+
+An optional *observer* watches the flight without changing it (``fly --record`` writes
+it to a bag: :mod:`threat_planner.ros.recording.flight_record`). It has four methods,
+each given copies:
+
+* ``on_start(position, heading)``: the vehicle at t = 0, after the first plan;
+* ``on_replan(record, points, times)``: each entry of ``replans`` as it is made, the
+  first plan's included, with the trajectory published then (points (M, 3) [m], times
+  (M,) [s] from take-off); None and None when it published none (failed, arriving);
+* ``on_event(t, event)``: an event as it is applied, at the step time `t` [s];
+* ``on_step(t, position, heading)``: the vehicle after each step.
 """
 
 from __future__ import annotations
@@ -105,6 +116,7 @@ class _Flight:
         if first is None:
             raise PlanningError(self.replans[-1]['reason'])
         self.last = first
+        self.published = (first.points, first.times)   # the trajectory flown, timed
         self.ref = ReferencePath(first.points)
         self.s_now = 0.0
         h = self.ref.tangent(0.0) if heading is None else heading
@@ -136,24 +148,25 @@ class _Flight:
             self.replans[-1].update(entry_turn_deg=round(p.entry.turn_deg, 3),
                                     entry_feasible=p.entry.feasible)
 
-    def replan(self, t: float, reason: str) -> None:
+    def replan(self, t: float, reason: str) -> bool:
         """Keep commit_s of the current path and replan from its end (module docstring).
 
         The step the node takes too: :func:`threat_planner.core.flight.commit.commit`,
         then :func:`~threat_planner.core.flight.commit.replan_in_flight`. A failed replan
-        is reported at the time of the commit point (the replan's t0).
+        is reported at the time of the commit point (the replan's t0). Returns whether a
+        new trajectory is flown (``published``).
         """
         kept = commit(self.ref, self.s_now, t, self.goal, self.speed, self.commit_s)
         if kept.arriving:
             self.replans.append({'t': t, 'latency_ms': 0.0, 'reason': reason, 'ok': True,
                                  'note': 'arriving: nothing left to replan'})
-            return
+            return False
         try:
             flight = replan_in_flight(self.known, kept, self.sc.box, self.cfg,
                                       zones=tuple(self.zones), terrain=self.terrain)
         except ThreatPlannerError as exc:
             self._failed(kept.t_end, reason, exc)
-            return
+            return False
         new = flight.plan
         self._planned(t, reason, new)
         old = self.ref
@@ -166,6 +179,8 @@ class _Flight:
         self.max_jump = max(self.max_jump, float(jump),
                             float(np.linalg.norm(new.points[0] - kept.end)))
         self.s_now = 0.0
+        self.published = (flight.points, flight.times)
+        return True
 
     def step(self) -> float:
         """Fly one step; return the distance from the path after it [m]."""
@@ -186,9 +201,14 @@ def _lethal_entries(path: NDArray, times: NDArray, truth: ThreatTimeline) -> lis
     return out
 
 
+def _copies(published: tuple[NDArray, NDArray]) -> tuple[NDArray, NDArray]:
+    return tuple(np.array(a, float) for a in published)
+
+
 def fly(scenario, events: list[Event], config: PlannerConfig, speed: float, *,
         commit_s: float = 2.0, dt: float = DT, heading: NDArray | None = None,
-        max_time_s: float | None = None, hindsight: bool = True) -> FlightReport:
+        max_time_s: float | None = None, hindsight: bool = True,
+        observer=None) -> FlightReport:
     """Fly `scenario` through `events` (module docstring).
 
     Parameters
@@ -212,6 +232,8 @@ def fly(scenario, events: list[Event], config: PlannerConfig, speed: float, *,
         event's time plus 30 s.
     hindsight : bool
         Also plan with every event known at t = 0 (J_hindsight).
+    observer : object, optional
+        Told of the flight as it goes (module docstring); None: nobody is.
 
     Returns
     -------
@@ -239,6 +261,9 @@ def fly(scenario, events: list[Event], config: PlannerConfig, speed: float, *,
             raise InputError(f'{e.label}: {g.tolist()} is outside bounds '
                              f'{scenario.box.lo.tolist()}..{scenario.box.hi.tolist()}')
     flight = _Flight(scenario, config, speed, commit_s, dt, heading)
+    if observer is not None:
+        observer.on_replan(dict(flight.replans[-1]), *_copies(flight.published))
+        observer.on_start(flight.vehicle.position.copy(), flight.vehicle.heading.copy())
     if max_time_s is None:
         last_event = events[-1].t if events else 0.0
         max_time_s = 3 * flight.ref.length / speed + last_event + 30.0
@@ -252,9 +277,14 @@ def fly(scenario, events: list[Event], config: PlannerConfig, speed: float, *,
             if g is not None:
                 flight.goal = g
             reasons.append(events[k].describe())
+            if observer is not None:
+                observer.on_event(t, events[k])
             k += 1
         if reasons:
-            flight.replan(t, '; '.join(reasons))
+            new = flight.replan(t, '; '.join(reasons))
+            if observer is not None:
+                observer.on_replan(dict(flight.replans[-1]),
+                                   *(_copies(flight.published) if new else (None, None)))
         before = flight.vehicle.position.copy()
         tracking = max(tracking, flight.step())
         after = flight.vehicle.position
@@ -269,10 +299,14 @@ def fly(scenario, events: list[Event], config: PlannerConfig, speed: float, *,
             times.append(t)
             path.append(closest)
             reached = True
+            if observer is not None:
+                observer.on_step(t, closest.copy(), flight.vehicle.heading.copy())
             break
         t += dt
         times.append(t)
         path.append(after.copy())
+        if observer is not None:
+            observer.on_step(t, after.copy(), flight.vehicle.heading.copy())
     times, path = np.asarray(times), np.asarray(path)
     check = check_limits(path, FlightLimits.of(config), float(scenario.box.lo[2]))
     limits = {'feasible': check.feasible, 'climb_deg': check.climb_deg,
