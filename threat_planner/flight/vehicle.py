@@ -82,9 +82,10 @@ class PointMass:
     def _turn(self, h: NDArray, want: NDArray, dt: float) -> NDArray:
         """Turn unit `h` towards `want` by at most ``speed dt / (R TURN_MARGIN)``.
 
-        `want` is within the climb and dive limits, and so is every heading. Along the great circle first; where that circle bulges past a limit (a turn at a
-        steep climb limit goes over the pole), at the flight-path angle the heading
-        has, about the vertical, by the angle that turns it as far.
+        `want` is within the climb and dive limits, and so is every heading. Along the
+        great circle first; where that circle bulges past a limit (a turn at a steep
+        climb limit goes over the pole), at the flight-path angle the heading has, about
+        the vertical, by the angle that turns it as far.
         """
         if self.min_turn_radius_m <= 0:
             return want
