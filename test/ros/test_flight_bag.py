@@ -160,7 +160,8 @@ def _copy(src: Path, dst: Path, change) -> None:
                 topics[m.topic] = 0
             msg = change(m.topic, topics[m.topic], m.msg)
             topics[m.topic] += 1
-            rec.write(m.topic, msg, log_time_ns=m.log_time_ns)
+            if msg is not None:     # None: dropped
+                rec.write(m.topic, msg, log_time_ns=m.log_time_ns)
 
 
 def test_a_tampered_flight_bag_fails_the_replay(tmp_path):
@@ -204,6 +205,45 @@ def test_bad_flight_bags_exit_2_with_one_line(tmp_path):
     cut.write_bytes(cut.read_bytes()[:20_000])
     one_line_error(replay(cut), 'cut.mcap')
     one_line_error(replay(BAGS / 'flight_popup.mcap', '--live'), '--live:')
+    unfinished = tmp_path / 'unfinished.mcap'
+    _copy(BAGS / 'flight_popup.mcap', unfinished,
+          lambda topic, index, msg: None if topic == '/flight_result' else msg)
+    one_line_error(replay(unfinished), 'no /flight_result: the flight did not finish')
+
+
+def test_replay_with_other_settings_differs():
+    p = replay(BAGS / 'flight_moving.mcap', '--w', '0.3')
+    assert p.returncode == 1 and 'REGRESSION' in p.stdout
+    assert 'first difference: plan 1 at t=0.00 s: path' in p.stdout, p.stdout
+
+
+def test_the_observer_changes_nothing_and_events_round_trip():
+    """fly() flies the same with a recorder watching; an event's JSON parses back to it."""
+    from threat_planner.core.inputs.config import PlannerConfig
+    from threat_planner.core.inputs.scenario import load_scenario
+    from threat_planner.flight.events import load_events, parse_events
+    from threat_planner.flight.fly import fly
+    from threat_planner.ros.recording.flight_record import event_mapping
+    from threat_planner.ros.recording.flight_replay import _Collector
+    scenario, events_file = FLIGHTS['flight_moving']
+    sc = load_scenario(REPO / scenario)
+    events = load_events(REPO / events_file)
+    cfg = PlannerConfig(method='paper')
+    watcher = _Collector()
+    alone = fly(sc, events, cfg, 20.0, hindsight=False)
+    watched = fly(sc, events, cfg, 20.0, hindsight=False, observer=watcher)
+    assert np.array_equal(alone.path, watched.path) and alone.flown.J == watched.flown.J
+    assert len(watcher.plans) == len(alone.replans) == 4
+    assert all(p is not None and len(p) > 2 for _, p in watcher.plans)
+    zone = {'t': 1.0, 'add_zone': {'type': 'sphere', 'center': [50.0, 50.0, 70.0],
+                                   'radius': 8.0}}
+    for listed in (events, parse_events({'events': [zone]})):
+        doc = json.loads(json.dumps({'events': [event_mapping(e) for e in listed]}))
+        again = parse_events(doc)
+        assert [event_mapping(e) for e in again] == doc['events']
+        assert [(e.t, e.kind, e.label) for e in again] == [(e.t, e.kind, e.label)
+                                                           for e in listed]
+    assert doc['events'][0] == zone
 
 
 def test_fly_record_refuses_an_unwritable_target(tmp_path):

@@ -64,7 +64,7 @@ class RecordedFlight:
     path: Path
     setup: dict
     plans: List[RecordedPlan]
-    result: Optional[dict]
+    result: dict
 
 
 def _json(path: Path, topic: str, text: str) -> dict:
@@ -102,6 +102,9 @@ def load_flight(path, *, tolerant: bool = False) -> RecordedFlight:
             infos.append(m.msg)
     if setup is None:
         raise RecordingError(f'{path}: no {SETUP_TOPIC}: not a flight recording')
+    if result is None:
+        raise RecordingError(f'{path}: no {RESULT_TOPIC}: the flight did not finish '
+                             'recording')
     if setup.get('format') != FLIGHT_FORMAT:
         raise RecordingError(f"{path}: {SETUP_TOPIC}.format: expected {FLIGHT_FORMAT!r}, "
                              f"got {setup.get('format')!r}")
@@ -159,7 +162,7 @@ class FlightReplay:
 
     @property
     def j_rel(self) -> Optional[float]:
-        """Relative difference of J_flown (None if the bag has no result)."""
+        """Relative difference of J_flown (None if the bag has none)."""
         old, new = self.j_flown
         return None if old is None else abs(new - old) / max(abs(old), 1e-12)
 
@@ -325,11 +328,6 @@ def replay_flight(path, *, tolerance: float = 1e-6,
         rows.append(row)
     out = FlightReplay(flight, tolerance, overrides, rows)
     result = flight.result
-    if result is None:
-        out.notes.append(f'no {RESULT_TOPIC} recorded')
-        out.j_flown = (None, report.flown.J)
-        out.reached_goal = (None, report.reached_goal)
-        return out
     old = result.get('J_flown')
     out.j_flown = (None if old is None else float(old), report.flown.J)
     out.reached_goal = (result.get('reached_goal'), report.reached_goal)
