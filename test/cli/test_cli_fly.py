@@ -22,8 +22,8 @@ EVENTS = ROOT / 'examples' / 'flight' / 'popup.yaml'
 #: The keys the issue asks OUT.json for, and the ones fly adds beside them.
 ISSUE_KEYS = {'flown', 'replans', 'J_flown', 'J_hindsight', 'max_jump_m', 'reached_goal'}
 MORE_KEYS = {'scenario', 'events_file', 'commit_s', 'w', 'start_heading', 'speed_mps',
-             'flown_cost', 'hindsight_cost', 'max_tracking_m', 'goal_miss_m', 'flown_limits',
-             'lethal_entries'}
+             'flown_cost', 'hindsight_cost', 'hindsight_path', 'max_tracking_m', 'goal_miss_m',
+             'flown_limits', 'lethal_entries'}
 
 
 def _run(*args):

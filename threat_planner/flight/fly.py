@@ -68,6 +68,7 @@ class FlightReport:
     lethal: list[dict] = field(default_factory=list)
     speed_mps: float = 0.0
     goal_miss_m: float = math.inf
+    hindsight_path: NDArray | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready dictionary."""
@@ -81,10 +82,14 @@ class FlightReport:
             'J_flown': self.flown.J, 'flown_cost': cost(self.flown),
             'J_hindsight': None if self.hindsight is None else self.hindsight.J,
             'hindsight_cost': cost(self.hindsight),
+            'hindsight_path': (None if self.hindsight_path is None
+                               else self.hindsight_path.tolist()),
             'max_jump_m': self.max_jump_m, 'max_tracking_m': self.max_tracking_m,
             'reached_goal': self.reached_goal,
             'goal_miss_m': self.goal_miss_m if math.isfinite(self.goal_miss_m) else None,
-            'flown_limits': self.limits,
+            # A straight flight's turn radius is inf: JSON has none, so null.
+            'flown_limits': {k: (None if isinstance(v, float) and not math.isfinite(v)
+                                 else v) for k, v in self.limits.items()},
             'lethal_entries': self.lethal,
         }
 
@@ -114,7 +119,7 @@ class _Flight:
         self.max_jump = 0.0
         first = self._plan(np.asarray(scenario.start, float), heading)
         if first is None:
-            raise PlanningError(self.replans[-1]['reason'])
+            raise PlanningError(f"first plan: {self.replans[-1]['error']}")
         self.last = first
         self.published = (first.points, first.times)   # the trajectory flown, timed
         self.ref = ReferencePath(first.points)
@@ -153,7 +158,8 @@ class _Flight:
 
         The step the node takes too: :func:`threat_planner.core.flight.commit.commit`,
         then :func:`~threat_planner.core.flight.commit.replan_in_flight`. A failed replan
-        is reported at the time of the commit point (the replan's t0). Returns whether a
+        is reported at the event's time, like one that succeeds, its t0 (the commit
+        point's time) as ``t0``. Returns whether a
         new trajectory is flown (``published``).
         """
         kept = commit(self.ref, self.s_now, t, self.goal, self.speed, self.commit_s)
@@ -165,7 +171,8 @@ class _Flight:
             flight = replan_in_flight(self.known, kept, self.sc.box, self.cfg,
                                       zones=tuple(self.zones), terrain=self.terrain)
         except ThreatPlannerError as exc:
-            self._failed(kept.t_end, reason, exc)
+            self._failed(t, reason, exc)   # at the event, like a replan that succeeds
+            self.replans[-1]['t0'] = kept.t_end
             return False
         new = flight.plan
         self._planned(t, reason, new)
@@ -315,10 +322,11 @@ def fly(scenario, events: list[Event], config: PlannerConfig, speed: float, *,
     best = None
     if hindsight:
         best = plan_in_time(truth, scenario.start, final_goal, scenario.box, config, speed,
-                            0.0, zones=tuple(truth_zones), terrain=scenario.airspace.terrain
-                            ).cost
+                            0.0, zones=tuple(truth_zones), terrain=scenario.airspace.terrain,
+                            heading=heading)
     return FlightReport(times, path, flight.replans, timed_path_cost(path, times, truth,
                                                                      config.w),
-                        best, flight.max_jump, tracking, reached, limits,
-                        _lethal_entries(path, times, truth), speed,
-                        miss if reached else float(np.linalg.norm(path[-1] - flight.goal)))
+                        None if best is None else best.cost, flight.max_jump, tracking,
+                        reached, limits, _lethal_entries(path, times, truth), speed,
+                        miss if reached else float(np.linalg.norm(path[-1] - flight.goal)),
+                        None if best is None else best.points)
