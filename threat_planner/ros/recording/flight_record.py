@@ -25,7 +25,8 @@ names, types and QoS:
 * ``/odom`` (nav_msgs/Odometry): the vehicle at t = 0 and after every step (20 Hz);
 * ``/flight_result`` (std_msgs/String, at the end): J_flown, reached_goal and the rest.
 
-Log times and stamps are flight time after the fixed :data:`EPOCH_NS`, and the file is
+The node's ``record`` parameter holds the file's name, not its folder. Log times and
+stamps are flight time after the fixed :data:`EPOCH_NS`, and the file is
 written without the recorder's wall-clock flush timer, so recording one flight twice
 gives the same bytes except for the latencies (``plan_wall_ms``); with
 ``latency=False`` (``--record-no-latency``) those are left out and the files are equal.
@@ -167,7 +168,8 @@ class FlightRecorder:
         self._timeline = scenario_timeline(scenario)
         self._zones = [z for z in scenario.airspace.zones
                        if not z.label.startswith('threats[')]
-        self._heading = setup.get('heading') is not None
+        self._heading = setup.get('heading')
+        self._speed = float(setup['speed'])
         self._plans = 0
         self._changed = False
         self._next_cloud = CLOUD_PERIOD_S
@@ -243,7 +245,8 @@ class FlightRecorder:
             self._rec.write('/plan_info', msg, log_time_ns=_ns(t))
             return
         cost = timed_path_cost(points, times, self._timeline, self._cfg.w)
-        kind = 'in_flight' if n > 1 else ('from_vehicle' if self._heading else 'timed')
+        first = 'timed' if self._heading is None else 'from_vehicle'
+        kind = 'in_flight' if n > 1 else first
         values.update({
             'plan': kind, 'method': self._cfg.method, 'w': self._cfg.w,
             'threats': len(self._timeline.active(t)),
@@ -251,8 +254,10 @@ class FlightRecorder:
             'replan_J': record.get('J_planned'), 'rounds': record.get('rounds'),
             'start': 'warm' if record.get('warm') else 'cold',
             'path_points': len(points), 't0_ns': _ns(t),
-            'speed_mps': self._cfg.speed_mps, 'eta_s': float(times[-1]) - t,
+            'speed_mps': self._speed, 'eta_s': float(times[-1]) - t,
             'commit_s': self._cfg.commit_s})
+        if n == 1 and self._heading is not None:
+            values['start_heading'] = '[' + ', '.join(f'{v:.9g}' for v in self._heading) + ']'
         for key in ('entry_turn_deg', 'entry_feasible'):
             if key in record:
                 values[key] = record[key]
@@ -321,7 +326,7 @@ class FlightRecorder:
         q = quaternions(yaw_pitch(np.asarray(heading, float)[None]))[0]
         o = msg.pose.pose.orientation
         o.x, o.y, o.z, o.w = (float(c) for c in q)
-        msg.twist.twist.linear.x = float(self._cfg.speed_mps)
+        msg.twist.twist.linear.x = self._speed
         self._rec.write('/odom', msg, log_time_ns=_ns(t))
 
 
