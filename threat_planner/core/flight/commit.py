@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from threat_planner.core.flight.reference import distinct, ReferencePath
-from threat_planner.core.flight.replan import plan_in_time, ROUNDS, TimedPlan
+from threat_planner.core.flight.replan import plan_in_time, TimedPlan
 from threat_planner.core.flight.timeline import ThreatTimeline
 from threat_planner.core.inputs.config import PlannerConfig
 from threat_planner.core.result import PlanResult
@@ -35,8 +35,14 @@ from threat_planner.core.world.terrain import Terrain
 from threat_planner.core.world.threats import Box
 from threat_planner.errors import InputError
 
-__all__ = ['ARRIVED_M', 'Commit', 'InFlightPlan', 'commit', 'replan_in_flight', 'splice']
+__all__ = ['ARRIVED_M', 'Commit', 'IN_FLIGHT_ROUNDS', 'InFlightPlan', 'commit', 'replan_in_flight',
+           'splice']
 
+#: Rounds of a replan in flight. Its guess is the trajectory being flown, which already
+#: places the threats where the vehicle will meet them: on 32 bench flights (20 and 100
+#: threats, two seeds) one round gave the same median J_flown / J_hindsight as three
+#: (1.276 against 1.274) at replan latency p50 46 ms and p99 1.11 s against 54 ms, 1.33 s.
+IN_FLIGHT_ROUNDS = 1
 #: A commit that ends this close to the goal is arriving [m].
 ARRIVED_M = 1e-6
 #: A guess (the old trajectory past the commit) is kept only if it ends this close to the
@@ -179,7 +185,7 @@ def splice(kept: Commit, plan: TimedPlan) -> InFlightPlan:
 def replan_in_flight(known: ThreatTimeline, kept: Commit, box: Box, config: PlannerConfig,
                      *, zones: tuple[Zone, ...] = (), terrain: Optional[Terrain] = None,
                      warm_start: Optional[PlanResult] = None,
-                     rounds: int = ROUNDS) -> InFlightPlan:
+                     rounds: int = IN_FLIGHT_ROUNDS) -> InFlightPlan:
     """Replan from the end of `kept` through the threats in time, and splice.
 
     Parameters

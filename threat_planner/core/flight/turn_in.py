@@ -40,6 +40,9 @@ ON_PATH = 0.5
 ALIGNED_DEG = 30.0
 #: Joints tried after the pursuit is on the plan, one plan vertex apart.
 JOINTS = 6
+#: A pursuit that has turned onto the plan and flown this many turn circles' length
+#: since without a joint gives up (a failing one flew on to its step budget: 27 ms).
+GIVE_UP_TURNS = 2.0
 
 
 def _unit(v: NDArray) -> NDArray:
@@ -168,7 +171,11 @@ def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: fl
     window = int(4 * step / max(dense_s[1], 1e-12)) + 2
     cos_aligned = math.cos(math.radians(ALIGNED_DEG))
     turned = turned_heading = None
-    for _ in range(int(4 * (length + 2 * math.pi * radius) / step) + 10):
+    budget = int(4 * (length + 2 * math.pi * radius) / step) + 10
+    after_turn = int(GIVE_UP_TURNS * 2 * math.pi * radius / step)
+    for n in range(budget):
+        if turned is not None and n - len(turned) > after_turn:
+            break      # on the plan's line, yet no joint holds: another way round may
         near = dense[i:i + window]
         i += int(np.argmin(np.linalg.norm(near - p, axis=1)))
         s_here = dense_s[i]
