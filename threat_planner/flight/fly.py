@@ -151,7 +151,8 @@ class _Flight:
                              'J_planned': p.cost.J, 'warm': bool(p.result.warm)})
         if p.entry is not None:
             self.replans[-1].update(entry_turn_deg=round(p.entry.turn_deg, 3),
-                                    entry_feasible=p.entry.feasible)
+                                    entry_feasible=p.entry.feasible,
+                                    entry_clear=p.entry.clear)
 
     def replan(self, t: float, reason: str) -> bool:
         """Keep commit_s of the current path and replan from its end (module docstring).

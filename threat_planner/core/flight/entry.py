@@ -16,14 +16,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from threat_planner.core.optimise.limits import check_limits, FlightLimits
-from threat_planner.core.flight.turn_in import pursue_plan
+from threat_planner.core.flight.turn_in import outside, pursue_plan
 from threat_planner.core.world.threats import Box
+from threat_planner.core.world.zones import Zone
 from threat_planner.errors import InputError, ThreatPlannerError
 
 __all__ = ['Entry', 'enter', 'unit_heading']
@@ -47,6 +48,9 @@ class Entry:
         leaves along the heading.
     turn_deg : float
         Angle between the heading and the plan's first segment before [deg].
+    clear : bool
+        Whether it keeps out of the zones it was to keep out of (False: no turn-in
+        within the limits did, and this one goes through one).
 
     """
 
@@ -54,6 +58,7 @@ class Entry:
     changed: int
     feasible: bool
     turn_deg: float
+    clear: bool = True
 
 
 def unit_heading(value: ArrayLike, name: str = 'start_heading') -> NDArray:
@@ -80,7 +85,8 @@ def unit_heading(value: ArrayLike, name: str = 'start_heading') -> NDArray:
 
 
 def enter(points: ArrayLike, heading: ArrayLike, box: Box | None, limits: FlightLimits,
-          replan: Callable[[NDArray], NDArray] | None = None) -> Entry:
+          replan: Callable[[NDArray], NDArray] | None = None,
+          zones: Sequence[Zone] = ()) -> Entry:
     """Return the plan `points` made to leave its start along `heading` (module docstring).
 
     Parameters
@@ -96,6 +102,8 @@ def enter(points: ArrayLike, heading: ArrayLike, box: Box | None, limits: Flight
     replan : callable, optional
         ``replan(point)`` plans the same picture from `point` to the goal, (K, 3) [m];
         used where the pursuit cannot join the plan (module docstring).
+    zones : sequence of Zone
+        Zones the turn-in keeps out of (the lethal spheres the plan was made around).
 
     Returns
     -------
@@ -114,12 +122,25 @@ def enter(points: ArrayLike, heading: ArrayLike, box: Box | None, limits: Flight
     if len(pts) < 4:   # one free vertex is too few to turn in: add vertices evenly
         pts = np.vstack([pts[:1], pts[0] + np.linspace(0, 1, 5)[1:-1, None] * (
             pts[1] - pts[0]), pts[1:]])
+    got = _enter(pts, h, turn, box, limits, replan, zones)
+    if got.feasible or not zones:
+        return got
+    # No way round keeps out of the zones too: within the limits, through one, said so.
+    blind = _enter(pts, h, turn, box, limits, replan, ())
+    if blind.feasible:
+        return Entry(blind.points, blind.changed, True, blind.turn_deg, clear=False)
+    return got
+
+
+def _enter(pts: NDArray, h: NDArray, turn: float, box: Box | None, limits: FlightLimits,
+           replan: Callable[[NDArray], NDArray] | None, zones: Sequence[Zone]) -> Entry:
+    """Return :func:`enter`'s path for a plan not already along the heading."""
     floor = _floor(box)
     corners = None if box is None else (box.lo, box.hi)
     # A pursuit of the plan within the limits is flyable by construction (.turn_in).
     # SLSQP from it never ended lower within the limits (18 headings on a 20-threat
     # field: 0 of 18, at 30-900 ms each against 1-3 ms for the pursuit), so it is kept.
-    got = pursue_plan(pts, h, limits, floor, corners)
+    got = pursue_plan(pts, h, limits, floor, corners, zones)
     if got.feasible:
         return Entry(got.path, len(got.path) - 1 - _tail_vertices(got.path, pts), True,
                      math.degrees(turn))
@@ -132,11 +153,12 @@ def enter(points: ArrayLike, heading: ArrayLike, box: Box | None, limits: Flight
         except ThreatPlannerError:
             again = None
         if again is not None:
-            rest = pursue_plan(again, got.turned_heading, limits, floor, corners)
+            rest = pursue_plan(again, got.turned_heading, limits, floor, corners, zones)
             # Without the joint vertex: the two steps either side of it are collinear,
             # and as one segment the turn after it keeps the share it had in `rest`.
             joined = np.vstack([got.turned[:-1], rest.path[1:]])
-            if _inside(joined, box) and check_limits(joined, limits, floor).feasible:
+            if (_inside(joined, box) and outside(joined, zones)
+                    and check_limits(joined, limits, floor).feasible):
                 return Entry(joined, len(joined) - 1, True, math.degrees(turn))
             if _excess(joined, limits, floor, box) < _excess(best, limits, floor, box):
                 best = joined

@@ -197,7 +197,8 @@ def plan_in_time(known: ThreatTimeline, start: ArrayLike, goal: ArrayLike, box: 
                                 terrain, None).path
 
         entered = enter(best.points, heading, box if config.confine_to_box else None,
-                        FlightLimits.of(config), replan=again)
+                        FlightLimits.of(config), replan=again,
+                        zones=tuple(zones) + tuple(best_lethal))
         best.points, best.entry = entered.points, entered
         best.times = _times(best.points, speed, t0)
         best.cost = timed_path_cost(best.points, best.times, known, config.w)

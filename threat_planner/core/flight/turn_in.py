@@ -16,13 +16,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from threat_planner.core.optimise.limits import check_limits, FlightLimits
+from threat_planner.core.world.zones import Zone
 
-__all__ = ['Pursuit', 'pursue_plan']
+__all__ = ['outside', 'Pursuit', 'pursue_plan']
 
 #: Step of the pursuit, in turn radii: a chord of 0.25 R turns the fillet radius of the
 #: pursued arc down by 0.5 %, within MARGIN.
@@ -107,7 +109,8 @@ class Pursuit:
 
 
 def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: float,
-                box: tuple[NDArray, NDArray] | None = None) -> Pursuit:
+                box: tuple[NDArray, NDArray] | None = None, zones: Sequence[Zone] = ()
+                ) -> Pursuit:
     """Return the plan `points` entered along `heading` by a pursuit (module docstring).
 
     A pursuit that cannot close in on a plan climbing or diving at the limit (it lags
@@ -127,6 +130,9 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
     box : tuple of NDArray, optional
         Corners (lo, hi) [m] the path must stay within; near a wall the pursuit aims
         inside it.
+    zones : sequence of Zone
+        Zones the path must keep out of (a lethal sphere): a pursuit or joint that
+        enters one does not count; another way round may not.
 
     Returns
     -------
@@ -139,7 +145,7 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
     # until the plan is ahead (a U-turn at a wall must turn away from it).
     for side in (0, 1, -1):
         for look_z in LOOK_Z:
-            got = _pursue(points, heading, limits, floor_z, look_z, box, side)
+            got = _pursue(points, heading, limits, floor_z, look_z, box, side, zones)
             if got.feasible:
                 return got
             first = first or got
@@ -147,7 +153,8 @@ def pursue_plan(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z
 
 
 def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: float,
-            look_z: float, box: tuple[NDArray, NDArray] | None, side: int = 0) -> Pursuit:
+            look_z: float, box: tuple[NDArray, NDArray] | None, side: int = 0,
+            zones: Sequence[Zone] = ()) -> Pursuit:
     """Fly one pursuit, aiming in height `look_z` turn radii ahead.
 
     With `side` +1 (-1) it first turns left (right) level at the full rate for as long
@@ -198,12 +205,12 @@ def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: fl
                 and float(v @ tangent) >= cos_aligned and s_here < length - step):
             if turned is None:
                 turned, turned_heading = np.array(trail), v.copy()
-            joined = _join(trail, pts, arc, s_here, limits, floor_z, box)
+            joined = _join(trail, pts, arc, s_here, limits, floor_z, box, zones)
             if joined is not None:
                 return Pursuit(joined, True, turned, turned_heading)
         if len(trail) > 1 and float(np.linalg.norm(pts[-1] - p)) <= 2 * step:
             path = np.vstack(trail + [pts[-1]])   # at the goal: ends here if it may
-            if _fits(path, limits, floor_z, box):
+            if _fits(path, limits, floor_z, box, zones):
                 return Pursuit(path, True, turned, turned_heading)
         if len(trail) > 1 and (pull_up or push_down):   # in its vertical plane, as tight
             flat = _unit(np.array([v[0], v[1], 0.0]))
@@ -215,7 +222,7 @@ def _pursue(points: NDArray, heading: NDArray, limits: FlightLimits, floor_z: fl
         p = p + step * v
         trail.append(p.copy())
     path = np.vstack(trail + [pts[-1]])
-    return Pursuit(path, _fits(path, limits, floor_z, box), turned, turned_heading)
+    return Pursuit(path, _fits(path, limits, floor_z, box, zones), turned, turned_heading)
 
 
 def _along(pts: NDArray, arc: NDArray, last_dir: NDArray, s: float) -> NDArray:
@@ -226,16 +233,24 @@ def _along(pts: NDArray, arc: NDArray, last_dir: NDArray, s: float) -> NDArray:
 
 
 def _fits(path: NDArray, limits: FlightLimits, floor_z: float,
-          box: tuple[NDArray, NDArray] | None) -> bool:
-    """Return whether `path` meets the limits and stays in the box (1e-9 m slack)."""
+          box: tuple[NDArray, NDArray] | None, zones: Sequence[Zone] = ()) -> bool:
+    """Return whether `path` meets the limits, stays in the box and out of the zones."""
     if box is not None and (np.any(path < box[0] - 1e-9) or np.any(path > box[1] + 1e-9)):
         return False
-    return check_limits(path, limits, floor_z).feasible
+    if not check_limits(path, limits, floor_z).feasible:
+        return False
+    return outside(path, zones)
+
+
+def outside(path: NDArray, zones: Sequence[Zone]) -> bool:
+    """Return whether no segment of `path` enters any of `zones`."""
+    return all(float(z.segment_distance(path[:-1], path[1:])[0].min()) >= 0.0
+               for z in zones)
 
 
 def _join(trail: list[NDArray], pts: NDArray, arc: NDArray, s_here: float,
-          limits: FlightLimits, floor_z: float,
-          box: tuple[NDArray, NDArray] | None) -> NDArray | None:
+          limits: FlightLimits, floor_z: float, box: tuple[NDArray, NDArray] | None,
+          zones: Sequence[Zone] = ()) -> NDArray | None:
     """Return the trail joined to the plan's vertices, the first joint within the limits."""
     first = int(np.searchsorted(arc, s_here, side='right'))
     for j in range(first, min(first + JOINTS, len(pts))):
@@ -244,6 +259,6 @@ def _join(trail: list[NDArray], pts: NDArray, arc: NDArray, s_here: float,
         if j + 1 < len(pts) and arc[j] - s_here < arc[j + 1] - arc[j]:
             continue
         path = np.vstack(trail + [pts[j:]])
-        if _fits(path, limits, floor_z, box):
+        if _fits(path, limits, floor_z, box, zones):
             return path
     return None
