@@ -122,14 +122,16 @@ def enter(points: ArrayLike, heading: ArrayLike, box: Box | None, limits: Flight
     if len(pts) < 4:   # one free vertex is too few to turn in: add vertices evenly
         pts = np.vstack([pts[:1], pts[0] + np.linspace(0, 1, 5)[1:-1, None] * (
             pts[1] - pts[0]), pts[1:]])
-    got = _enter(pts, h, turn, box, limits, replan, zones)
-    if got.feasible or not zones:
+    # Within the limits first; only a turn-in that then enters a zone is sought again
+    # among the ways round that keep out of the zones (a path that breaks the limits
+    # would break them with the zones too, and the first pass is the common answer).
+    got = _enter(pts, h, turn, box, limits, replan, ())
+    if not got.feasible or outside(got.points, zones):
         return got
-    # No way round keeps out of the zones too: within the limits, through one, said so.
-    blind = _enter(pts, h, turn, box, limits, replan, ())
-    if blind.feasible:
-        return Entry(blind.points, blind.changed, True, blind.turn_deg, clear=False)
-    return got
+    clear = _enter(pts, h, turn, box, limits, replan, zones)
+    if clear.feasible:
+        return clear
+    return Entry(got.points, got.changed, True, got.turn_deg, clear=False)
 
 
 def _enter(pts: NDArray, h: NDArray, turn: float, box: Box | None, limits: FlightLimits,
