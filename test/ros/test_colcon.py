@@ -52,13 +52,13 @@ def test_the_build_compiles_the_kernels_into_the_shared_cache(install):
 
 def test_install_layout(install):
     pkg = install / 'threat_planner'
-    for script in ('planner_node', 'threat_publisher'):
+    for script in ('planner_node', 'threat_publisher', 'sim_vehicle'):
         assert os.access(pkg / 'lib' / 'threat_planner' / script, os.X_OK), script
     # package data: the discovery profile the executables load
     assert list(pkg.glob('lib/python*/site-packages/threat_planner/ros/fastdds_discovery.xml'))
     share = pkg / 'share' / 'threat_planner'
     for rel in ('package.xml', 'config/planner.yaml', 'launch/planner.launch.py',
-                'scenarios/uniform20_0.yaml'):
+                'launch/flight.launch.py', 'scenarios/uniform20_0.yaml'):
         assert (share / rel).is_file(), rel
     assert (install / 'share' / 'ament_index' / 'resource_index' / 'packages' /
             'threat_planner').is_file() or (
