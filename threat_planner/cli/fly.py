@@ -33,7 +33,7 @@ from threat_planner.core.result import PlanResult
 from threat_planner.errors import InputError
 
 __all__ = ['HeadedPlan', 'add_fly_command', 'add_start_heading', 'enter_plan',
-           'finite_json', 'flight_lines', 'refuse_heading_with', 'start_heading']
+           'flight_lines', 'refuse_heading_with', 'start_heading']
 
 
 def add_start_heading(parser: argparse.ArgumentParser) -> None:
@@ -96,7 +96,7 @@ def _events(path: str) -> list:
 
 
 def _cmd_fly(args: argparse.Namespace) -> int:
-    from threat_planner.flight.fly import fly
+    from threat_planner.flight.fly import finite_json, fly
     scenario = load_scenario(args.scenario)
     cfg = config_from(args, scenario)
     heading = start_heading(args)
@@ -128,23 +128,6 @@ def _cmd_fly(args: argparse.Namespace) -> int:
                     title=f'{scenario.name}: flown J={report.flown.J:.1f}'
                           + ('' if ratio is None else f', {ratio:.3f} x hindsight'))
     return 0
-
-
-def finite_json(value: object) -> object:
-    """Return `value` with every NaN and infinity (numpy ones too) as None, for strict JSON."""
-    if isinstance(value, dict):
-        return {k: finite_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [finite_json(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return finite_json(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    return value
 
 
 def _ratio(report) -> float | None:

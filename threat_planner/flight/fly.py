@@ -44,7 +44,7 @@ from threat_planner.flight.events import apply_event, Event
 from threat_planner.flight.follow import follow_step
 from threat_planner.flight.vehicle import PointMass
 
-__all__ = ['FlightReport', 'fly', 'scenario_timeline']
+__all__ = ['finite_json', 'FlightReport', 'fly', 'scenario_timeline']
 
 #: Simulation step [s] (the flown path's spacing in time; the issue asks for <= 0.1 s).
 DT = 0.05
@@ -92,6 +92,24 @@ class FlightReport:
                                  else v) for k, v in self.limits.items()},
             'lethal_entries': self.lethal,
         }
+
+
+def finite_json(value: object) -> object:
+    """Return `value` with NaN and infinities as None and numpy values as Python ones.
+
+    For strict JSON (``allow_nan=False``): a report, the events, a flight bag's setup.
+    """
+    if isinstance(value, dict):
+        return {str(k): finite_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [finite_json(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    return value
 
 
 def scenario_timeline(scenario) -> ThreatTimeline:

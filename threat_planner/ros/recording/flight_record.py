@@ -36,7 +36,6 @@ from __future__ import annotations
 
 from dataclasses import asdict
 import json
-import math
 from pathlib import Path
 from typing import Optional
 
@@ -54,7 +53,7 @@ from threat_planner.core.inputs.config import PlannerConfig
 from threat_planner.core.trajectory import quaternions, yaw_pitch
 from threat_planner.core.world.airspace import zone_to_mapping
 from threat_planner.flight.events import apply_event, Event
-from threat_planner.flight.fly import fly, FlightReport, scenario_timeline
+from threat_planner.flight.fly import finite_json, fly, FlightReport, scenario_timeline
 from threat_planner.ros.conversions import (ns_to_stamp, path_to_msg, plan_info_msg,
                                             pointcloud2_from_threats, zones_to_markers)
 from threat_planner.ros.interface import (INPUT_TOPICS, LATCHED, NODE_NAME, OUTPUT_TOPICS,
@@ -63,7 +62,7 @@ from threat_planner.ros.interface import (INPUT_TOPICS, LATCHED, NODE_NAME, OUTP
 from threat_planner.ros.recording.record import _scenario_parameters
 
 __all__ = ['EPOCH_NS', 'FLIGHT_FORMAT', 'FlightRecorder', 'RESULT_TOPIC', 'SETUP_TOPIC',
-           'event_mapping', 'finite', 'is_flight_bag', 'record_flight']
+           'event_mapping', 'is_flight_bag', 'record_flight']
 
 #: ``format`` of ``/flight_setup``: what replay understands.
 FLIGHT_FORMAT = 'threat_planner flight 1'
@@ -80,21 +79,6 @@ CHILD_FRAME = 'base_link'
 _TOPICS = ('start', 'goal_pose', 'no_fly_zones', 'threats', 'odom')
 
 
-def finite(value: object) -> object:
-    """Return `value` with NaN and infinities as None and numpy values as Python ones."""
-    if isinstance(value, dict):
-        return {str(k): finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [finite(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    return value
-
-
 def event_mapping(event: Event) -> dict:
     """Return `event` in the events file's layout: ``{'t': 2.0, 'add_threat': {...}}``."""
     v = event.values
@@ -104,7 +88,7 @@ def event_mapping(event: Event) -> dict:
         body = zone_to_mapping(v['zone'])
     else:
         body = dict(v)
-    return {'t': float(event.t), event.kind: finite(body)}
+    return {'t': float(event.t), event.kind: finite_json(body)}
 
 
 def is_flight_bag(path, *, tolerant: bool = False) -> bool:
@@ -117,7 +101,7 @@ def _ns(t: float) -> int:
 
 
 def _json(data: object) -> String:
-    return String(data=json.dumps(finite(data), allow_nan=False, separators=(',', ':')))
+    return String(data=json.dumps(finite_json(data), allow_nan=False, separators=(',', ':')))
 
 
 def _pose(xyz: NDArray, frame_id: str, stamp_ns: int) -> PoseStamped:
