@@ -128,7 +128,7 @@ LAYERS = ('core', 'export', 'batch', 'bag', 'ros', 'cli')
 #: Inside core, lowest first; one rank may hold several folders that must not import
 #: one another ('' is the core package's own modules: planner, result).
 CORE_RANKS = (('_numba_cache', '_scipy_first', '_vector'), ('_aot',), ('world',), ('geo',),
-              ('inputs', 'cost'), ('network', 'optimise'), ('methods',), ('',))
+              ('inputs', 'cost'), ('network', 'optimise'), ('methods',), ('detection',), ('',))
 
 
 def import_graph(package: Path) -> dict[str, set[str]]:

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from threat_planner.core.cost.closed_form import Cost
+from threat_planner.core.detection.model import DetectionModel
 from threat_planner.core.inputs.config import PlannerConfig
 from threat_planner.core.inputs.settings import METHODS
 from threat_planner.core.methods.problem import Candidate, Clock, Problem
@@ -270,4 +271,9 @@ def _result(problem: Problem, best: Candidate, warm_note: str = '') -> PlanResul
         warm=bool(warm_note), warm_note=warm_note, basin_margin=best.basin_margin,
         problem=(problem.threats, problem.s, problem.t, problem.box, config),
         clearance=None if problem.airspace is None
-        else problem.airspace.clearance(best.final), speed_mps=config.speed_mps)
+        else problem.airspace.clearance(best.final), speed_mps=config.speed_mps,
+        cost_model=config.cost_model, detection_model=DetectionModel.of(config),
+        masking=problem.airspace.terrain if problem.airspace is not None
+        and problem.airspace.masking else None,
+        objective=getattr(best, 'objective', None),
+        detection_status=getattr(best, 'detection_status', ''))

@@ -9,6 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from threat_planner.core.cost.closed_form import Cost
+from threat_planner.core.detection.hazard import DetectionReport, path_hazard
+from threat_planner.core.detection.model import DetectionModel
 from threat_planner.core.inputs.settings import PLANNER_SETTINGS
 from threat_planner.core.optimise.limits import FlightLimits, LimitCheck
 from threat_planner.core.optimise.smoothing import AngleCheck
@@ -18,7 +20,7 @@ from threat_planner.core.world.threats import Box, ThreatField
 if TYPE_CHECKING:  # the network's module imports scipy.spatial, a third of a second
     from threat_planner.core.network.partition import Network
 
-__all__ = ['PlanResult']
+__all__ = ['PlanResult', 'detection_of']
 
 
 @dataclass
@@ -57,7 +59,13 @@ class PlanResult:
         clearance: Smallest margins of the final path to the zones and the terrain
             floor (an ``airspace.Clearance``), or None without an airspace.
         speed_mps: Cruise speed the path is timed at [m/s] (the setting's; it shaped
-            nothing).
+            nothing, unless cost_model is 'detection').
+        cost_model: The cost the plan minimised: 'paper' (J) or 'detection'.
+        detection_model: The radar model :attr:`detection` is reported under.
+        masking: The terrain that hides the UAV from the radars, or None.
+        objective: The minimised w H + (1 - w) L / L_0 of a 'detection' plan, else None.
+        detection_status: A 'detection' plan's bound on P_detect: '' (no bound), 'met'
+            or why it is not.
     """
 
     method: str
@@ -90,6 +98,24 @@ class PlanResult:
     # airspace hook (issue 12): margins of the final path, None without an airspace.
     clearance: 'Clearance | None' = None  # noqa: F821
     speed_mps: float = PLANNER_SETTINGS['speed_mps'].default
+    # detection (issue 43): every plan reports its P_detect under the configured model.
+    cost_model: str = 'paper'
+    detection_model: DetectionModel | None = None
+    masking: object = None
+    objective: float | None = None
+    detection_status: str = ''
+    _detection: DetectionReport | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def detection(self) -> DetectionReport:
+        """P_detect, H and each threat's share of the final path (computed once, exact)."""
+        if self._detection is None:
+            threats = self.problem[0] if self.problem is not None else None
+            model = self.detection_model or DetectionModel(speed_mps=self.speed_mps)
+            if threats is None:
+                raise ValueError('detection: the plan keeps no threats to report it under')
+            self._detection = detection_of(self.path, threats, model, self.masking)
+        return self._detection
 
     @property
     def times(self) -> NDArray:
@@ -149,4 +175,19 @@ class PlanResult:
             'warm': self.warm,
             'timings_ms': self.timings_ms,
             **({} if self.clearance is None else {'clearance': self.clearance.as_dict()}),
+            'cost_model': self.cost_model,
+            'detection': {**self.detection.as_dict(),
+                          **({} if self.objective is None else {'objective': self.objective}),
+                          **({'status': self.detection_status}
+                             if self.detection_status else {})},
         }
+
+
+def detection_of(points: NDArray, threats: ThreatField, model: DetectionModel,
+                 masking: object = None) -> DetectionReport:
+    """Exact cumulative detection of a path, over the parts each radar sees."""
+    pieces = None
+    if masking is not None:
+        from threat_planner.core.cost.masking import visible_pieces
+        pieces = visible_pieces(points, threats.positions, masking)
+    return path_hazard(points, threats.positions, threats.intensities, model, pieces)

@@ -40,6 +40,13 @@ class PlannerConfig:
             stage of the planner reads it.
         commit_s: Trajectory ahead of the vehicle a replan in flight keeps [s]; no
             stage of the planner reads it.
+        cost_model: 'paper' (J) or 'detection' (w H + (1 - w) L / L_0, issue 43).
+        max_detection: Bound on P_detect of a 'detection' plan (1 = none): the shortest
+            path within it.
+        scan_period_s: Radar scan period T [s] of the detection model.
+        p_fa: False-alarm probability per scan, 0 < p_fa < 1.
+        swerling: Swerling case 0 or 1.
+        rcs: RCS model, 'constant S' [m^2] or 'ellipsoid A B C' [m].
         entry_candidates: K nodes tried as entry and as exit (Case 1).
         candidates: How 'improved' picks them: 'spread' (Fig. 11) or 'nearest'.
         network: 'box' (threats and the box surface) or 'threats' (the paper's).
@@ -68,6 +75,12 @@ class PlannerConfig:
     min_altitude_m: float = _D['min_altitude_m']
     speed_mps: float = _D['speed_mps']
     commit_s: float = _D['commit_s']
+    cost_model: str = _D['cost_model']
+    max_detection: float = _D['max_detection']
+    scan_period_s: float = _D['scan_period_s']
+    p_fa: float = _D['p_fa']
+    swerling: int = _D['swerling']
+    rcs: str = _D['rcs']
     entry_candidates: int = _D['entry_candidates']
     candidates: str = _D['candidates']
     network: str = _D['network']
@@ -92,5 +105,9 @@ class PlannerConfig:
         """Whether `other` makes the same paths: equal but for the :data:`TIMING_FIELDS`.
 
         A warm start compares settings with it, so a new cruise speed alone keeps it warm.
+        Under cost_model 'detection' the speed weighs the hazard (H = integral of P_d
+        ds / (v T)), so there it shapes the path like any other setting.
         """
-        return replace(self, **{f: getattr(other, f) for f in TIMING_FIELDS}) == other
+        timing = tuple(f for f in TIMING_FIELDS
+                       if not (f == 'speed_mps' and other.cost_model == 'detection'))
+        return replace(self, **{f: getattr(other, f) for f in timing}) == other

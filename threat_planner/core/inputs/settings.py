@@ -13,16 +13,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 import math
 import textwrap
-from typing import Optional
+from typing import Callable, Optional
 
+from threat_planner.core.inputs.rcs import parse_rcs
 from threat_planner.errors import InputError
 
-__all__ = ['CANDIDATE_RULES', 'METHODS', 'NETWORKS', 'NODE_SETTINGS', 'NO_LIMITS',
+__all__ = ['CANDIDATE_RULES', 'COST_MODELS', 'METHODS', 'NETWORKS', 'NODE_SETTINGS', 'NO_LIMITS',
            'PHYSICAL_LIMITS', 'PLANNER_SETTINGS', 'SETTINGS', 'Setting', 'params_file_text']
 
 METHODS = ('paper', 'improved', 'best')
 NETWORKS = ('box', 'threats')
 CANDIDATE_RULES = ('spread', 'nearest')
+COST_MODELS = ('paper', 'detection')
 
 
 @dataclass(frozen=True)
@@ -59,6 +61,9 @@ class Setting:
         A string that must not be blank.
     empty_ok : bool
         A float array that may also be empty (``[]`` = none).
+    parse : callable, optional
+        ``parse(value, name)`` raising InputError for a string the kind alone allows but
+        the setting does not (``rcs``).
 
     """
 
@@ -78,6 +83,7 @@ class Setting:
     cli: Optional[str] = None
     non_empty: bool = False
     empty_ok: bool = False
+    parse: Optional[Callable[[object, str], object]] = None
 
     @property
     def rule(self) -> str:
@@ -130,6 +136,8 @@ class Setting:
             return
         if not self._allowed(value):
             raise InputError(f'{self.name}: {self.rule}, got {_plain(value)}')
+        if self.parse is not None:
+            self.parse(value, self.name)
 
     def _allowed(self, value: object) -> bool:
         if self.choices is not None:
@@ -216,6 +224,27 @@ SETTINGS: tuple[Setting, ...] = (
             'Time of the trajectory ahead of the vehicle a replan in flight keeps unchanged, '
             'so the path never jumps under its follower (0 = replan from where it is)',
             unit='s', lo=0.0, hi=60.0, cli='commit'),
+    # Detection (issue 43): the cost minimised, and the radar model every plan's
+    # P_detect is reported under (core/detection/model.py states it).
+    Setting('cost_model', str, 'paper',
+            "Cost minimised: 'paper' (J = w J_R + (1 - w) J_L) or 'detection' "
+            "(w H + (1 - w) L / L_0, H the cumulative detection hazard; method best)",
+            choices=COST_MODELS, cli='cost'),
+    Setting('max_detection', float, 1.0,
+            "With cost_model detection, the shortest path whose P_detect is at most this "
+            "(1 = no bound: minimise w H + (1 - w) L / L_0 instead)",
+            lo=0.0, hi=1.0, lo_open=True, cli='max-detection'),
+    Setting('scan_period_s', float, 1.0, 'Radar scan period T of the detection model',
+            unit='s', lo=0.0, hi=3600.0, lo_open=True, cli='scan-period'),
+    Setting('p_fa', float, 1.0e-6, 'False-alarm probability per scan of the detection model',
+            lo=0.0, hi=1.0, lo_open=True, hi_open=True, cli='p-fa'),
+    Setting('swerling', int, 1,
+            'Swerling case of the detection model: 0 (steady target) or 1 (fluctuating)',
+            lo=0, hi=1, cli='swerling'),
+    Setting('rcs', str, 'constant 1.0',
+            "Radar cross-section of the UAV: 'constant S' [m^2] or 'ellipsoid A B C' "
+            "(semi-axes [m] along the nose, the right wing and down)", cli='rcs',
+            parse=parse_rcs),
     Setting('entry_candidates', int, 3, 'Network nodes tried as entry and as exit',
             lo=1, hi=64, cli='entry-candidates'),
     Setting('candidates', str, 'spread',

@@ -1,0 +1,259 @@
+"""Cumulative detection along a path: the hazard H, P_detect = 1 - exp(-H), and dH/dpoints.
+
+H = sum over threats of the integral of P_d,i(s) ds / (v T) along the polyline, each
+threat over the parts of the segments it sees (all of them without terrain masking). A
+segment's body frame is fixed along it (the nose along the segment flown).
+
+P_d tends to P_fa far from every radar, so each seen metre adds P_fa / (v T) per threat:
+that floor is integrated exactly, and the excess P_d - P_fa by composite Gauss-Legendre
+quadrature on pieces no longer than ``PIECE`` of the radar's closest approach (or of its
+detection range, where the path passes closer). :func:`path_hazard` doubles the pieces
+until H changes by less than ``TOLERANCE`` (relative): the reported H is exact to that.
+:func:`hazard_and_gradient` holds one such layout fixed, so the optimiser sees a smooth
+function with its exact gradient; the layout is re-made between its rounds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from threat_planner.core.detection.model import DetectionModel, p_detect_scan, snr
+
+__all__ = ['DetectionReport', 'Layout', 'hazard_and_gradient', 'layout', 'path_hazard', 'profile',
+           'PIECE', 'TOLERANCE']
+
+#: Gauss-Legendre nodes per piece.
+ORDER = 8
+#: Longest piece, as a fraction of the pair's closest approach (or detection range).
+PIECE = 0.5
+#: Most pieces of one (segment, threat) pair.
+MAX_PIECES = 256
+#: A pair whose largest SNR along its segment is below this adds only the floor (its
+#: excess is below 1e-12 P_fa |ln P_fa| per scan).
+NEGLIGIBLE_SNR = 1e-12
+#: Relative change of H at which :func:`path_hazard` stops doubling the pieces.
+TOLERANCE = 1e-10
+#: SNR at which a radar's range stands in for the closest approach of a pair that passes
+#: closer (P_d is flat inside it).
+RANGE_SNR = 1.0
+
+_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(ORDER)
+_NODES = 0.5 * (_NODES + 1.0)
+_WEIGHTS = 0.5 * _WEIGHTS
+
+
+@dataclass(frozen=True)
+class DetectionReport:
+    """Cumulative detection of one path.
+
+    Attributes
+    ----------
+    p_detect : float
+        P_detect = 1 - exp(-H).
+    hazard : float
+        H, the expected number of detections.
+    per_threat : ndarray
+        Each threat's H_i, (N,); they sum to H.
+
+    """
+
+    p_detect: float
+    hazard: float
+    per_threat: NDArray
+
+    def as_dict(self) -> dict:
+        """JSON-ready ``{P_detect, H, per_threat}``."""
+        return {'P_detect': self.p_detect, 'H': self.hazard,
+                'per_threat': [float(v) for v in self.per_threat]}
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Which (segment, threat) pieces a hazard sums, and where its quadrature nodes sit.
+
+    Attributes
+    ----------
+    seg, thr : ndarray of int
+        Segment and threat of each seen piece.
+    f0, f1 : ndarray
+        The piece runs from fraction f0 to f1 of its segment.
+    node_piece : ndarray of int
+        Piece of each quadrature node.
+    node_t, node_w : ndarray
+        Each node's fraction along its segment and its weight (a fraction of the segment).
+
+    """
+
+    seg: NDArray
+    thr: NDArray
+    f0: NDArray
+    f1: NDArray
+    node_piece: NDArray
+    node_t: NDArray
+    node_w: NDArray
+
+
+def _closest(a: NDArray, b: NDArray, q: NDArray) -> NDArray:
+    d = b - a
+    dd = np.maximum(np.einsum('ij,ij->i', d, d), 1e-300)
+    t = np.clip(np.einsum('ij,ij->i', q - a, d) / dd, 0.0, 1.0)
+    return np.linalg.norm(a + t[:, None] * d - q, axis=1)
+
+
+def layout(points: NDArray, positions: NDArray, intensities: NDArray, model: DetectionModel,
+           pieces: tuple | None = None, refine: int = 1) -> Layout:
+    """Lay out the quadrature of a path's excess hazard.
+
+    Parameters
+    ----------
+    points : ndarray
+        The polyline (M, 3) [m].
+    positions, intensities : ndarray
+        Threats (N, 3) [m] and F (N,).
+    model : DetectionModel
+        The radar model.
+    pieces : tuple, optional
+        ``(segment, threat, f0, f1)`` of the seen pieces (terrain masking,
+        :func:`threat_planner.core.cost.masking.visible_pieces`); None: every threat sees
+        every segment whole.
+    refine : int
+        Pieces per quadrature piece (each split in `refine` equal parts).
+
+    """
+    points = np.asarray(points, float)
+    a, b = points[:-1], points[1:]
+    n_seg, n_thr = len(a), len(positions)
+    if pieces is None:
+        seg = np.repeat(np.arange(n_seg), n_thr)
+        thr = np.tile(np.arange(n_thr), n_seg)
+        f0, f1 = np.zeros(len(seg)), np.ones(len(seg))
+    else:
+        seg, thr, f0, f1 = (np.asarray(x) for x in pieces)
+        seg, thr = seg.astype(np.int64), thr.astype(np.int64)
+        f0, f1 = f0.astype(float), f1.astype(float)
+    d = b - a
+    pa, pb = a[seg] + f0[:, None] * d[seg], a[seg] + f1[:, None] * d[seg]
+    near = _closest(pa, pb, positions[thr])
+    # sigma <= largest_rcs from every aspect: SNR <= F sigma_max / d^4.
+    reach = (np.asarray(intensities, float)[thr] * model.largest_rcs) ** 0.25
+    with np.errstate(divide='ignore'):
+        top = np.where(near > 0, (reach / np.maximum(near, 1e-300)) ** 4, np.inf)
+    length = np.linalg.norm(pb - pa, axis=1)
+    keep = (top >= NEGLIGIBLE_SNR) & (length > 0)
+    scale = np.maximum(near, reach / RANGE_SNR ** 0.25 * 0.25)
+    count = np.clip(np.ceil(length / (PIECE * scale)), 1, MAX_PIECES).astype(np.int64)
+    count = np.where(keep, count * int(refine), 0)
+    piece = np.repeat(np.arange(len(seg)), count)
+    first = np.cumsum(count) - count
+    j = np.arange(len(piece)) - first[piece]
+    width = (f1 - f0)[piece] / count[piece]
+    lo = f0[piece] + j * width
+    node_piece = np.repeat(piece, ORDER)
+    node_t = (lo[:, None] + _NODES[None, :] * width[:, None]).reshape(-1)
+    node_w = (_WEIGHTS[None, :] * width[:, None]).reshape(-1)
+    return Layout(seg=seg, thr=thr, f0=f0, f1=f1, node_piece=node_piece, node_t=node_t,
+                  node_w=node_w)
+
+
+def hazard_and_gradient(points: NDArray, positions: NDArray, intensities: NDArray,
+                        model: DetectionModel, lay: Layout, want_grad: bool = True
+                        ) -> tuple[NDArray, NDArray | None]:
+    """Each threat's H_i on a fixed layout, and dH/dpoints (M, 3) (None unless `want_grad`).
+
+    The floor P_fa (f1 - f0) l / (v T) of each piece is exact; the excess is the layout's
+    quadrature. The gradient is exact for this layout.
+    """
+    points = np.asarray(points, float)
+    positions = np.asarray(positions, float)
+    f = np.asarray(intensities, float)
+    a, b = points[:-1], points[1:]
+    e_all = b - a
+    l_all = np.linalg.norm(e_all, axis=1)
+    unit = e_all / np.where(l_all > 0, l_all, 1.0)[:, None]
+    vt = model.metres_per_scan
+    n_thr = len(positions)
+    span = lay.f1 - lay.f0
+    per = np.bincount(lay.thr, model.p_fa * span * l_all[lay.seg], n_thr) / vt
+    grad = np.zeros_like(points) if want_grad else None
+    if want_grad and len(lay.seg):
+        # d floor / d points, through the segment lengths.
+        w_seg = np.bincount(lay.seg, span, len(a)) * model.p_fa / vt
+        g_l = w_seg[:, None] * unit
+        grad[:-1] -= g_l
+        grad[1:] += g_l
+    if len(lay.node_t) == 0:
+        return per, grad
+    piece = lay.node_piece
+    seg, thr = lay.seg[piece], lay.thr[piece]
+    t = lay.node_t
+    e = e_all[seg]
+    g = positions[thr] - (a[seg] + t[:, None] * e)
+    s, ds_dg, ds_de = snr(model, f[thr], e, g, want_grad)
+    p, dp = p_detect_scan(s, model.p_fa, model.swerling, want_grad)
+    excess = p - model.p_fa
+    length = l_all[seg]
+    per = per + np.bincount(thr, lay.node_w * length * excess, n_thr) / vt
+    if not want_grad:
+        return per, None
+    wl = (lay.node_w * length / vt)[:, None]
+    g_g = wl * dp[:, None] * ds_dg            # d/dg of each node's term
+    g_e = wl * dp[:, None] * ds_de + (lay.node_w * excess / vt)[:, None] * unit[seg]
+    # g = q - (1 - t) a - t b, e = b - a.
+    ga = -(1.0 - t)[:, None] * g_g - g_e
+    gb = -t[:, None] * g_g + g_e
+    for k in range(3):
+        grad[:-1, k] += np.bincount(seg, ga[:, k], len(a))
+        grad[1:, k] += np.bincount(seg, gb[:, k], len(a))
+    return per, grad
+
+
+def path_hazard(points: NDArray, positions: NDArray, intensities: NDArray,
+                model: DetectionModel, pieces: tuple | None = None) -> DetectionReport:
+    """The exact cumulative detection of a polyline: its layout doubled until H settles."""
+    positions = np.asarray(positions, float).reshape(-1, 3)
+    if len(points) < 2 or len(positions) == 0:
+        return DetectionReport(0.0, 0.0, np.zeros(len(positions)))
+    refine, previous = 1, None
+    while True:
+        per, _ = hazard_and_gradient(points, positions, intensities, model,
+                                     layout(points, positions, intensities, model, pieces,
+                                            refine), want_grad=False)
+        total = float(per.sum())
+        if previous is not None and abs(total - previous) <= TOLERANCE * max(total, 1e-300):
+            break
+        if refine >= 64:
+            break
+        previous, refine = total, refine * 2
+    return DetectionReport(p_detect=float(-math.expm1(-total)), hazard=total, per_threat=per)
+
+
+def profile(points: NDArray, positions: NDArray, intensities: NDArray, model: DetectionModel,
+            per_segment: int = 16) -> tuple[NDArray, NDArray]:
+    """P_d per scan of each threat along a polyline, for figures (terrain not applied).
+
+    Returns
+    -------
+    tuple
+        ``(s, p_d)``: distance along the path at each sample (K,) [m] and P_d of each
+        threat there (N, K).
+
+    """
+    points = np.asarray(points, float)
+    positions = np.asarray(positions, float).reshape(-1, 3)
+    a, e = points[:-1], np.diff(points, axis=0)
+    t = (np.arange(per_segment) + 0.5) / per_segment
+    seg = np.repeat(np.arange(len(a)), per_segment)
+    frac = np.tile(t, len(a))
+    p = a[seg] + frac[:, None] * e[seg]
+    lengths = np.linalg.norm(e, axis=1)
+    s = (np.concatenate([[0.0], np.cumsum(lengths)])[:-1])[seg] + frac * lengths[seg]
+    n, k = len(positions), len(p)
+    ee = np.repeat(e[seg][None], n, 0).reshape(-1, 3)
+    g = (positions[:, None, :] - p[None, :, :]).reshape(-1, 3)
+    f = np.repeat(np.asarray(intensities, float), k)
+    values, _ = p_detect_scan(snr(model, f, ee, g)[0], model.p_fa, model.swerling)
+    return s, values.reshape(n, k)
