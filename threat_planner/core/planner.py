@@ -84,7 +84,9 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         airspace = None
     with _one_blas_thread(len(threats), airspace is not None), _joining_kernels():
         note = ''
-        if warm_start is not None and airspace is None:
+        if warm_start is not None and config.cost_model == 'detection':
+            note = 'cold: detection plans start from a cold paper-cost plan'
+        elif warm_start is not None and airspace is None:
             warm = _plan_warm(warm_start, threats, s, t, box, config)
             if isinstance(warm, PlanResult):
                 return warm
@@ -237,7 +239,12 @@ def _plan(threats: ThreatField, s: NDArray, t: NDArray, box: Box, config: Planne
     problem = Problem(threats=threats, s=s, t=t, box=box, config=config, network=network,
                       edge_j=edge_j, clock=clock, progress=progress, airspace=airspace,
                       on_initial=on_initial)
-    if airspace is not None:   # airspace hook (issue 12)
+    if config.cost_model == 'detection':   # issue 43: from method best's plan
+        from threat_planner.core.detection.plan import plan_detection
+        best = plan_detection(problem)
+        if airspace is not None:
+            network, edge_j = problem.network, None
+    elif airspace is not None:   # airspace hook (issue 12)
         from threat_planner.core.methods.in_airspace import plan_in_airspace
         best = plan_in_airspace(problem)
         network = problem.network

@@ -140,7 +140,7 @@ def layout(points: NDArray, positions: NDArray, intensities: NDArray, model: Det
     near = _closest(pa, pb, positions[thr])
     # sigma <= largest_rcs from every aspect: SNR <= F sigma_max / d^4.
     reach = (np.asarray(intensities, float)[thr] * model.largest_rcs) ** 0.25
-    with np.errstate(divide='ignore'):
+    with np.errstate(divide='ignore', over='ignore'):
         top = np.where(near > 0, (reach / np.maximum(near, 1e-300)) ** 4, np.inf)
     length = np.linalg.norm(pb - pa, axis=1)
     keep = (top >= NEGLIGIBLE_SNR) & (length > 0)

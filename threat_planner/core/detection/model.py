@@ -198,8 +198,11 @@ def p_detect_scan(snr_: NDArray, p_fa: float, swerling: int,
         return p, None
     z = np.sqrt(2.0 * sf * x)
     tiny = sf < 1e-12
-    ratio = np.where(tiny, 0.5 * x, special.ive(1, z) * np.sqrt(x / (2.0 * np.where(tiny, 1.0, sf))))
-    dp = np.where(finite, ratio * np.exp(z - sf - 0.5 * x), 0.0)
+    # e^(-SNR - x/2) I_1(z) sqrt(x / (2 SNR)), I_1 scaled (ive) against overflow; below
+    # 1e-12, I_1(z) = z / 2 to double precision and the factor is x / 2.
+    scaled = special.ive(1, z) * np.sqrt(x / (2.0 * np.where(tiny, 1.0, sf)))
+    dp = np.where(tiny, 0.5 * x * np.exp(-sf - 0.5 * x), scaled * np.exp(z - sf - 0.5 * x))
+    dp = np.where(finite, dp, 0.0)
     return p, dp
 
 

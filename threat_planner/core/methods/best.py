@@ -28,7 +28,7 @@ from threat_planner.core.network.seeds import surface_routes
 from threat_planner.core.optimise.optimisation import is_crowded, minimise_cost, PENALTY_START
 from threat_planner.core.optimise.smoothing import check_angles, resample
 
-__all__ = ['plan_best', 'repair']
+__all__ = ['network_routes', 'plan_best', 'repair']
 
 #: Stopping tolerance of the coarse screening minimisation (its segments, at which basins
 #: are told apart too: basins.COARSE_SEGMENTS).
@@ -63,6 +63,18 @@ REPAIR_BISECTIONS = 20
 
 def plan_best(p: Problem) -> Candidate:
     """Distinct J-weighted routes and the straight line screened, the best refined on J."""
+    routes = network_routes(p)
+    p.clock.lap('search_ms')
+    p.route_found(routes[0])
+    if not p.config.optimise:
+        best = smooth_route(p, routes[0], p.config.k)
+        p.clock.lap('smoothing_ms')
+        return best
+    return _optimise_routes(p, routes)
+
+
+def network_routes(p: Problem) -> list[list[int]]:
+    """Distinct J-weighted network routes, start and goal joined to K nodes each."""
     cfg, net, threats = p.config, p.network, p.threats
     entries = nearest_nodes(net, p.s, cfg.entry_candidates)
     exits = nearest_nodes(net, p.t, cfg.entry_candidates)
@@ -72,16 +84,9 @@ def plan_best(p: Problem) -> Candidate:
                               threats, p.edge_j.radius)
     len_s = np.linalg.norm(net.nodes[entries] - p.s, axis=1)
     len_t = np.linalg.norm(net.nodes[exits] - p.t, axis=1)
-    routes = alternative_routes(net, p.edge_j.weights(net.edge_lengths, cfg.w),
-                                p.edge_j.combine(legs_s, len_s, cfg.w), entries,
-                                p.edge_j.combine(legs_t, len_t, cfg.w), exits, cfg.routes)
-    p.clock.lap('search_ms')
-    p.route_found(routes[0])
-    if not cfg.optimise:
-        best = smooth_route(p, routes[0], cfg.k)
-        p.clock.lap('smoothing_ms')
-        return best
-    return _optimise_routes(p, routes)
+    return alternative_routes(net, p.edge_j.weights(net.edge_lengths, cfg.w),
+                              p.edge_j.combine(legs_s, len_s, cfg.w), entries,
+                              p.edge_j.combine(legs_t, len_t, cfg.w), exits, cfg.routes)
 
 
 def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:

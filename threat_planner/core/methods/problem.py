@@ -103,6 +103,10 @@ class Candidate:
     limits_bound: bool = False
     #: Its answers at the coarser levels under binding limits, coarsest first.
     levels: tuple = ()
+    #: cost_model 'detection' (issue 43): its w H + (1 - w) L / L_0 (L / L_0 under a
+    #: bound), and what became of a bound on P_detect ('' none, 'met' or why not).
+    objective: Optional[float] = None
+    detection_status: str = ''
 
 
 def smooth_route(p: Problem, seq: list[int], k: float) -> Candidate:

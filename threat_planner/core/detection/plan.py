@@ -1,0 +1,194 @@
+"""cost_model 'detection': the plan of least w H + (1 - w) L / L_0, or the shortest within a bound.
+
+Method ``best`` plans first on the paper's J (its routes, screening and refinement under
+the flight limits, or its airspace method among zones and terrain): that plan meets the
+limits, passes the threats on its own sides, and starts the minimisation of the detection
+objective, so the detection plan's objective is never above it. Beside it the straight
+line and the distinct network routes are screened on the detection objective at
+``COARSE_SEGMENTS`` segments (box only) and the best ``REFINED`` of them refined at the
+plan's own segments under the limits (:mod:`.optimise`); the feasible one of least exact
+objective wins.
+
+With ``max_detection`` P < 1 the plan is the shortest path with P_detect <= P: the same
+search on the near-pure hazard (weight ``LEAST_HAZARD_W``) finds the least P_detect within
+the limits; where that is above P the plan says so (``detection_status``) and returns it;
+else the length is minimised under H <= -ln(1 - P) from there (and from any start that
+meets the bound already). No-fly zones stay hard: a minimisation that enters one is drawn
+back towards its start to where it is clear.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from threat_planner.core.detection.model import DetectionModel
+from threat_planner.core.detection.optimise import (DetectionProblem, minimise_detection,
+                                                   Outcome, refine_slsqp)
+from threat_planner.core.methods.best import network_routes, plan_best
+from threat_planner.core.methods.problem import Candidate, Problem
+from threat_planner.core.optimise.limits import FlightLimits
+from threat_planner.core.optimise.smoothing import check_angles, resample
+
+__all__ = ['plan_detection']
+
+#: Segments of the screening minimisation.
+COARSE_SEGMENTS = 10
+#: Screened basins refined under the limits (the paper-cost plan's among the screened).
+REFINED = 3
+#: First penalty of the refinement under the limits (a screened answer breaks them a
+#: little at its corners; from the optimiser's PENALTY_START of 10 the violation fell
+#: slowly over 8 rounds on uniform20_0 with the ellipsoid RCS).
+START_PENALTY = 10.0
+#: L-BFGS-B iterations of a screening minimisation.
+SCREEN_ITER = 100
+#: Screened answers apart by less than this fraction of L_0 at every vertex share a basin.
+SAME_BASIN = 0.02
+#: Weight of H when looking for the least P_detect within the limits (the length only
+#: breaks ties between paths of equal hazard).
+LEAST_HAZARD_W = 1.0 - 1e-4
+#: Bisection steps drawing a path that entered a zone back towards its start.
+ZONE_BISECTIONS = 20
+
+
+def plan_detection(p: Problem) -> Candidate:
+    """Plan with cost_model 'detection' (see the module docstring)."""
+    if p.airspace is not None:
+        from threat_planner.core.methods.in_airspace import plan_in_airspace
+        paper = plan_in_airspace(p)
+    else:
+        paper = plan_best(p)
+    p.clock.lap('paper_plan_ms')
+    cfg = p.config
+    prob = _problem(p)
+    seeds = _seeds(p, paper)
+    bound = cfg.max_detection < 1.0
+    if not bound:
+        out = _search(p, prob, paper.final, seeds)
+        p.clock.lap('detection_ms')
+        return _candidate(p, paper, out, '')
+    h_max = -math.log1p(-cfg.max_detection)
+    least = _search(p, dataclasses.replace(prob, w=LEAST_HAZARD_W), paper.final, seeds)
+    if least.hazard > h_max:
+        p.clock.lap('detection_ms')
+        status = (f'unmet: the least P_detect found within the limits is '
+                  f'{-math.expm1(-least.hazard):.6g} > max_detection {cfg.max_detection:g}')
+        return _candidate(p, paper, least, status, bounded=dataclasses.replace(prob,
+                                                                               h_max=h_max))
+    bounded = dataclasses.replace(prob, h_max=h_max)
+    starts = [least.points]
+    for start in (paper.final, resample(np.vstack([p.s, p.t]), cfg.n_points)):
+        if bounded.feasible(start):
+            starts.append(start)
+    best = None
+    for start in starts:
+        out = _clear(p, start, minimise_detection(start, bounded), bounded)
+        if out.feasible and (best is None or out.objective < best.objective):
+            best = out
+    if best is None:   # the least-hazard path itself meets the bound
+        best = Outcome(least.points, least.hazard, bounded.objective(least.points), True, 0, 0)
+    p.clock.lap('detection_ms')
+    return _candidate(p, paper, best, 'met', bounded=bounded)
+
+
+def _problem(p: Problem) -> DetectionProblem:
+    cfg, box = p.config, p.box
+    lo, hi = box.lo.astype(float).copy(), box.hi.astype(float).copy()
+    if not cfg.confine_to_box:
+        lo, hi = np.full(3, -np.inf), np.full(3, np.inf)
+        lo[2] = float(box.lo[2])
+    lo[2] = min(lo[2] + cfg.min_altitude_m, float(box.hi[2]))
+    pieces_of = None
+    if p.airspace is not None and p.airspace.masking:
+        from threat_planner.core.cost.masking import visible_pieces
+        terrain, positions = p.airspace.terrain, p.threats.positions
+
+        def pieces_of(points: NDArray) -> tuple:
+            return visible_pieces(points, positions, terrain)
+    return DetectionProblem(positions=p.threats.positions, intensities=p.threats.intensities,
+                            model=DetectionModel.of(cfg), w=cfg.w,
+                            l0=max(float(np.linalg.norm(p.t - p.s)), 1e-9), lo=lo, hi=hi,
+                            limits=p.limits, floor_z=float(box.lo[2]), pieces_of=pieces_of)
+
+
+def _seeds(p: Problem, paper: Candidate) -> list[NDArray]:
+    """The straight line and the distinct network routes, as polylines."""
+    seeds = [np.vstack([p.s, p.t])]
+    if p.airspace is None and p.edge_j is not None:
+        nodes = p.network.nodes
+        seeds += [np.vstack([p.s, nodes[seq], p.t]) for seq in network_routes(p)]
+    return seeds
+
+
+def _search(p: Problem, prob: DetectionProblem, paper: NDArray, seeds: list[NDArray]
+            ) -> Outcome:
+    """Screen the seeds coarsely, refine the paper plan and the best screened other basins.
+
+    A screened answer within ``SAME_BASIN`` of L_0 of one ranked above it (every vertex,
+    at equal arc-length steps) is that basin again and is not refined.
+    """
+    free = dataclasses.replace(prob, limits=FlightLimits())
+    screened = []
+    for seed in [paper, *seeds]:
+        coarse = resample(seed, COARSE_SEGMENTS)
+        out = minimise_detection(coarse, free, rounds=1, max_iter=SCREEN_ITER)
+        screened.append((out.objective, out.points))
+    screened.sort(key=lambda item: item[0])
+    n = p.config.n_points
+    starts, basins = [], []
+    for _, points in screened:
+        if len(starts) >= REFINED:
+            break
+        if any(np.max(np.linalg.norm(points - other, axis=1)) < SAME_BASIN * prob.l0
+               for other in basins):
+            continue
+        basins.append(points)
+        starts.append(resample(points, n))
+    h = prob.hazard(paper)
+    # The paper-cost plan meets the limits: the detection plan is never above it.
+    best = Outcome(paper, h, prob.objective(paper, h), prob.feasible(paper, h), 0, 0)
+    for start in starts:
+        out = _clear(p, start, refine_slsqp(start, prob), prob)
+        if out.feasible and (not best.feasible or out.objective < best.objective):
+            best = out
+    return best
+
+
+def _clear(p: Problem, start: NDArray, out: Outcome, prob: DetectionProblem) -> Outcome:
+    """Return out, or where it enters a no-fly zone, the clear path nearest it towards start."""
+    air = p.airspace
+    if air is None or not out.feasible or len(start) != len(out.points):
+        return out
+    if bool(np.all(air.segment_ok(out.points[:-1], out.points[1:]))):
+        return out
+
+    def ok(points: NDArray) -> bool:
+        return bool(np.all(air.segment_ok(points[:-1], points[1:]))) and prob.feasible(points)
+    if not ok(start):
+        return dataclasses.replace(out, feasible=False)
+    lo, hi = 0.0, 1.0
+    for _ in range(ZONE_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        if ok(start + mid * (out.points - start)):
+            lo = mid
+        else:
+            hi = mid
+    points = start + lo * (out.points - start)
+    h = prob.hazard(points)
+    return Outcome(points, h, prob.objective(points, h), True, out.rounds, out.evaluations)
+
+
+def _candidate(p: Problem, paper: Candidate, out: Outcome, status: str,
+               bounded: DetectionProblem | None = None) -> Candidate:
+    cfg = p.config
+    points = out.points
+    objective = out.objective if bounded is None else bounded.objective(points)
+    return dataclasses.replace(
+        paper, final=points, smoothed=None, smoothed_cost=None, k=float('nan'), steps=0,
+        converged=True, cost=p.cost(points),
+        angles=check_angles(points, cfg.max_pitch_deg, cfg.max_turn_deg),
+        seed=f'{paper.seed}, detection', limit_check=p.check(points), objective=objective,
+        detection_status=status)
