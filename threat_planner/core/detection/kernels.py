@@ -18,6 +18,8 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from threat_planner.core.detection.model import SURE_GAP
+
 try:
     # numba itself, not the planner's njit: these kernels have no AOT export, so they
     # compile (once an install, ~10 s) even where the AOT module stands in for the rest.
@@ -33,8 +35,8 @@ except ImportError:  # pragma: no cover - numba is in install_requires
 
 __all__ = ['compiled_hazard', 'swerling0']
 
-#: sqrt(2 SNR) - sqrt(-2 ln P_fa) beyond which Q_1 = 1 - (below 1e-17).
-_SURE_GAP = 9.0
+#: sqrt(2 SNR) - sqrt(-2 ln P_fa) beyond which Q_1 = 1 (the model's SURE_GAP).
+_SURE_GAP = SURE_GAP
 
 
 @njit(cache=True)

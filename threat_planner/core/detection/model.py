@@ -30,7 +30,11 @@ from scipy import special
 from threat_planner.core.inputs.rcs import parse_rcs
 from threat_planner.errors import InputError
 
-__all__ = ['DetectionModel', 'p_detect_scan', 'snr']
+__all__ = ['DetectionModel', 'p_detect_scan', 'snr', 'SURE_GAP']
+
+#: sqrt(2 SNR) - sqrt(-2 ln P_fa) beyond which a steady target's P_d is 1 (1 - Q_1 below
+#: 1e-17: the Rician tail beyond 9 standard deviations).
+SURE_GAP = 9.0
 
 
 @dataclass(frozen=True)
@@ -191,7 +195,10 @@ def p_detect_scan(snr_: NDArray, p_fa: float, swerling: int,
         p = np.exp(log_fa * inv)
         return (p, -log_fa * p * inv * inv) if want_grad else (p, None)
     x = -2.0 * log_fa
-    finite = np.isfinite(s)
+    # Where sqrt(2 SNR) exceeds sqrt(x) by SURE_GAP, 1 - Q_1 < 1e-17 (and ncx2.sf gives
+    # NaN at SNR ~ 1e300): P_d = 1 there.
+    finite = np.isfinite(s) & (np.sqrt(2.0 * np.where(np.isfinite(s), s, 0.0))
+                               <= math.sqrt(x) + SURE_GAP)
     sf = np.where(finite, s, 0.0)
     p = np.where(finite, _ncx2_sf(x, sf), 1.0)
     if not want_grad:
