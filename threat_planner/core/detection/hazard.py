@@ -41,9 +41,18 @@ TOLERANCE = 1e-10
 #: closer (P_d is flat inside it).
 RANGE_SNR = 1.0
 
-_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(ORDER)
-_NODES = 0.5 * (_NODES + 1.0)
-_WEIGHTS = 0.5 * _WEIGHTS
+#: Nodes of a short piece (no longer than SHORT of its scale), where the integrand is
+#: nearly a polynomial of low degree: half the work of a full one.
+SHORT_ORDER = 4
+SHORT = 0.15
+
+
+def _rule(order: int) -> tuple[NDArray, NDArray]:
+    nodes, weights = np.polynomial.legendre.leggauss(order)
+    return 0.5 * (nodes + 1.0), 0.5 * weights
+
+
+_RULES = {order: _rule(order) for order in (ORDER, SHORT_ORDER)}
 
 
 @dataclass(frozen=True)
@@ -152,9 +161,14 @@ def layout(points: NDArray, positions: NDArray, intensities: NDArray, model: Det
     j = np.arange(len(piece)) - first[piece]
     width = (f1 - f0)[piece] / count[piece]
     lo = f0[piece] + j * width
-    node_piece = np.repeat(piece, ORDER)
-    node_t = (lo[:, None] + _NODES[None, :] * width[:, None]).reshape(-1)
-    node_w = (_WEIGHTS[None, :] * width[:, None]).reshape(-1)
+    short = (length / (PIECE * scale))[piece] / count[piece] * PIECE <= SHORT
+    parts = []
+    for order, pick in ((SHORT_ORDER, short), (ORDER, ~short)):
+        nodes, weights = _RULES[order]
+        parts.append((np.repeat(piece[pick], order),
+                      (lo[pick, None] + nodes[None, :] * width[pick, None]).reshape(-1),
+                      (weights[None, :] * width[pick, None]).reshape(-1)))
+    node_piece, node_t, node_w = (np.concatenate(x) for x in zip(*parts))
     return Layout(seg=seg, thr=thr, f0=f0, f1=f1, node_piece=node_piece, node_t=node_t,
                   node_w=node_w)
 
