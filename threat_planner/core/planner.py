@@ -82,7 +82,8 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
         airspace.check_point('goal', t)
     else:
         airspace = None
-    with _one_blas_thread(len(threats), airspace is not None), _joining_kernels():
+    with _one_blas_thread(len(threats), airspace is not None
+                          or config.cost_model == 'detection'), _joining_kernels():
         note = ''
         if warm_start is not None and config.cost_model == 'detection':
             note = 'cold: detection plans start from a cold paper-cost plan'
@@ -112,7 +113,9 @@ def _one_blas_thread(n_threats: int, airspace: bool) -> ContextManager:
     scenarios at w 0.5, one thread against two: J apart by up to 2.3e-5 relative), and
     from there by whole basins (a live airspace recording replayed 0.17 % apart): they are
     planned on one thread, as their replays are. The other plans were the same bit for bit
-    on one and two threads (test_planner).
+    on one and two threads (test_planner). A detection plan spends its time in SLSQP's
+    small dense QPs, where a second BLAS thread only spins (uniform20_0, ellipsoid RCS:
+    3.5 s either way, 7.1 s of CPU against 3.9 s): one thread.
     """
     if n_threats < BLAS_LIMIT_THREATS and not airspace:
         return nullcontext()

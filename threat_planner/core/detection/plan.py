@@ -60,7 +60,6 @@ def plan_detection(p: Problem) -> Candidate:
         paper = plan_in_airspace(p)
     else:
         paper = plan_best(p)
-    p.clock.lap('paper_plan_ms')
     cfg = p.config
     prob = _problem(p)
     seeds = _seeds(p, paper)
