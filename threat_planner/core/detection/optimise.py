@@ -23,8 +23,8 @@ from threat_planner.core.detection.hazard import layout, path_hazard
 from threat_planner.core.detection.kernels import compiled_hazard
 from threat_planner.core.detection.model import DetectionModel
 from threat_planner.core.optimise.limit_kernels import LimitTerm
-from threat_planner.core.optimise.limits import (constraint_jacobian, constraint_values,
-                                                 FlightLimits, meets_limits)
+from threat_planner.core.optimise.limits import (constraint_values_jacobian, FlightLimits,
+                                                 meets_limits)
 from threat_planner.core.optimise.optimisation import aim, PENALTY_GROWTH, PENALTY_START
 
 __all__ = ['DetectionProblem', 'Outcome', 'minimise_detection', 'refine_slsqp']
@@ -273,12 +273,21 @@ def refine_slsqp(x0: NDArray, prob: DetectionProblem, max_iter: int = SLSQP_ITER
                 value, grad = value + w_h * h, grad + w_h * gh
             return value, grad
 
+        limit_cache: dict = {}
+
+        def limit_rows(z: NDArray) -> tuple[NDArray, NDArray]:
+            # SLSQP asks for the values and the Jacobian at each point: one pass for both.
+            key = z.tobytes()
+            if key not in limit_cache:
+                g, jac = constraint_values_jacobian(full(z), aimed)
+                limit_cache.clear()
+                limit_cache[key] = (g, jac[:, 1:-1, :].reshape(-1, 3 * (n1 - 2)))
+            return limit_cache[key]
+
         constraints = []
         if prob.limits.any_constraint:
-            constraints.append({
-                'type': 'ineq', 'fun': lambda z: constraint_values(full(z), aimed),
-                'jac': lambda z: constraint_jacobian(full(z), aimed)[:, 1:-1, :].reshape(
-                    -1, 3 * (n1 - 2))})
+            constraints.append({'type': 'ineq', 'fun': lambda z: limit_rows(z)[0],
+                                'jac': lambda z: limit_rows(z)[1]})
         if bounded:
             constraints.append({'type': 'ineq',
                                 'fun': lambda z: np.array([(target - hazard(z)[0]) / target]),

@@ -39,7 +39,8 @@ from threat_planner.core._vector import vector_length
 from threat_planner.core.optimise.limit_kernels import _EPS, DEGENERATE, LimitTerm, measure
 
 __all__ = ['FlightLimits', 'LimitCheck', 'check_limits', 'climb_angles', 'meets_limits',
-           'constraint_jacobian', 'constraint_values', 'constraint_vjp', 'turn_radii']
+           'constraint_jacobian', 'constraint_values', 'constraint_values_jacobian',
+           'constraint_vjp', 'turn_radii']
 
 #: Slack of the final check, so a path optimised onto a limit is not failed by rounding.
 CHECK_SLACK = 1e-6
@@ -327,12 +328,18 @@ def constraint_vjp(points: NDArray, limits: FlightLimits, weights: NDArray
 
 def constraint_jacobian(points: NDArray, limits: FlightLimits) -> NDArray:
     """Dense Jacobian dg/dx, (m, n+1, 3), for checks and small problems."""
+    return constraint_values_jacobian(points, limits)[1]
+
+
+def constraint_values_jacobian(points: NDArray, limits: FlightLimits
+                               ) -> tuple[NDArray, NDArray]:
+    """Values g and the dense Jacobian dg/dx (m, n+1, 3) from one pass over the path."""
     g, blocks = _blocks(points, limits)
     jac = np.zeros((len(g), len(points), 3))
     for rows, verts, deriv in blocks:
         for j in range(verts.shape[1]):
             jac[rows, verts[:, j]] += deriv[:, j]
-    return jac
+    return g, jac
 
 
 def warm_up() -> None:
