@@ -85,9 +85,7 @@ def plan(threats: ThreatField, start: ArrayLike, goal: ArrayLike, box: Box,
     with _one_blas_thread(len(threats), airspace is not None
                           or config.cost_model == 'detection'), _joining_kernels():
         note = ''
-        if warm_start is not None and config.cost_model == 'detection':
-            note = 'cold: detection plans start from a cold paper-cost plan'
-        elif warm_start is not None and airspace is None:
+        if warm_start is not None and airspace is None:
             warm = _plan_warm(warm_start, threats, s, t, box, config)
             if isinstance(warm, PlanResult):
                 return warm
@@ -192,6 +190,13 @@ def _plan_warm(previous: PlanResult, threats: ThreatField, s: NDArray, t: NDArra
         return note
     problem = Problem(threats=threats, s=s, t=t, box=box, config=config,
                       network=previous.network, edge_j=None, clock=clock)
+    if config.cost_model == 'detection':   # issue 43: the previous basin, refined again
+        from threat_planner.core.detection.plan import replan_detection
+        cand = replan_detection(problem, path, previous)
+        clock.lap('warm_ms')
+        if cand is None:
+            return 'cold: the warm detection replan broke a limit or its bound'
+        return _result(problem, cand, note)
     cand = refine(problem, path, previous.node_sequence, previous.seed, tolerance=1e-8,
                   warm=True)
     if cand.limits_bound:

@@ -33,7 +33,7 @@ from threat_planner.core.methods.problem import Candidate, Problem
 from threat_planner.core.optimise.limits import FlightLimits
 from threat_planner.core.optimise.smoothing import check_angles, resample
 
-__all__ = ['plan_detection']
+__all__ = ['plan_detection', 'replan_detection']
 
 #: Segments of the screening minimisation.
 COARSE_SEGMENTS = 10
@@ -65,16 +65,17 @@ def plan_detection(p: Problem) -> Candidate:
     seeds = _seeds(p, paper)
     bound = cfg.max_detection < 1.0
     if not bound:
-        out = _search(p, prob, paper.final, seeds)
+        out, lead = _search(p, prob, paper.final, seeds)
         p.clock.lap('detection_ms')
-        return _candidate(p, paper, out, '')
+        return _candidate(p, paper, out, '', lead)
     h_max = -math.log1p(-cfg.max_detection)
-    least = _search(p, dataclasses.replace(prob, w=LEAST_HAZARD_W), paper.final, seeds)
+    least, lead = _search(p, dataclasses.replace(prob, w=LEAST_HAZARD_W), paper.final,
+                          seeds)
     if least.hazard > h_max:
         p.clock.lap('detection_ms')
         status = (f'unmet: the least P_detect found within the limits is '
                   f'{-math.expm1(-least.hazard):.6g} > max_detection {cfg.max_detection:g}')
-        return _candidate(p, paper, least, status, bounded=dataclasses.replace(prob,
+        return _candidate(p, paper, least, status, lead, bounded=dataclasses.replace(prob,
                                                                                h_max=h_max))
     bounded = dataclasses.replace(prob, h_max=h_max)
     starts = [least.points]
@@ -92,7 +93,39 @@ def plan_detection(p: Problem) -> Candidate:
     if best is None:   # the least-hazard path itself meets the bound
         best = Outcome(least.points, least.hazard, bounded.objective(least.points), True, 0, 0)
     p.clock.lap('detection_ms')
-    return _candidate(p, paper, best, 'met', bounded=bounded)
+    return _candidate(p, paper, best, 'met', lead, bounded=bounded)
+
+
+def replan_detection(p: Problem, path: NDArray, previous: object) -> Candidate | None:
+    """Refine a warm replan's path (:mod:`threat_planner.core.methods.warm`) on the detection
+    objective: SLSQP at the plan's segments, the rounds where it stops short; None where
+    the result breaks a limit or the bound (the replan goes cold).
+
+    The warm rule's basin lead is the detection basins' (:func:`_search` sets it), so a
+    move that could swap them plans cold.
+    """
+    cfg = p.config
+    prob = _problem(p)
+    bounded = cfg.max_detection < 1.0
+    if bounded:
+        prob = dataclasses.replace(prob, h_max=-math.log1p(-cfg.max_detection))
+    out = refine_slsqp(path, prob, max_iter=FINE_ITER, layouts=2)
+    if not out.feasible:
+        out = minimise_detection(out.points, prob)
+    h = prob.hazard(path)
+    if prob.feasible(path, h) and (not out.feasible or prob.objective(path, h) <= out.objective):
+        out = Outcome(path, h, prob.objective(path, h), True, 0, 0)
+    if not out.feasible:
+        return None
+    points = out.points
+    return Candidate(seq=list(previous.node_sequence), initial=previous.initial_path,
+                     smoothed=None, smoothed_cost=None, final=points, k=float('nan'),
+                     steps=0, converged=True, cost=p.cost(points),
+                     angles=check_angles(points, cfg.max_pitch_deg, cfg.max_turn_deg),
+                     seed=previous.seed, limit_check=p.check(points),
+                     basin_margin=previous.basin_margin, limits_bound=True,
+                     objective=out.objective,
+                     detection_status='met' if bounded else '')
 
 
 def _problem(p: Problem) -> DetectionProblem:
@@ -125,11 +158,13 @@ def _seeds(p: Problem, paper: Candidate) -> list[NDArray]:
 
 
 def _search(p: Problem, prob: DetectionProblem, paper: NDArray, seeds: list[NDArray]
-            ) -> Outcome:
+            ) -> tuple[Outcome, float]:
     """Screen the seeds coarsely, refine the paper plan and the best screened other basins.
 
     A screened answer within ``SAME_BASIN`` of L_0 of one ranked above it (every vertex,
-    at equal arc-length steps) is that basin again and is not refined.
+    at equal arc-length steps) is that basin again and is not refined. Returns the best
+    feasible outcome and the screening's lead of the best basin over the next distinct
+    one (relative; inf where every seed screened into one basin): the warm rule's margin.
     """
     free = dataclasses.replace(prob, limits=FlightLimits())
     screened = []
@@ -139,15 +174,15 @@ def _search(p: Problem, prob: DetectionProblem, paper: NDArray, seeds: list[NDAr
         screened.append((out.objective, out.points))
     screened.sort(key=lambda item: item[0])
     n = p.config.n_points
-    starts, basins = [], []
-    for _, points in screened:
-        if len(starts) >= REFINED:
-            break
+    starts, basins, values = [], [], []
+    for value, points in screened:
         if any(np.max(np.linalg.norm(points - other, axis=1)) < SAME_BASIN * prob.l0
                for other in basins):
             continue
         basins.append(points)
-        starts.append(points)
+        values.append(value)
+        if len(starts) < REFINED:
+            starts.append(points)
     if p.airspace is not None:
         # The screening knows no zones: its basins may cross one, and be drawn back to
         # the paper-cost plan whole; refined from that plan itself, the path stays near it.
@@ -156,21 +191,37 @@ def _search(p: Problem, prob: DetectionProblem, paper: NDArray, seeds: list[NDAr
     # The paper-cost plan meets the limits: the detection plan is never above it.
     best = Outcome(paper, h, prob.objective(paper, h), prob.feasible(paper, h), 0, 0)
     middles: list[NDArray] = []
+    ends = []
     for start in starts:
-        out = _clear(p, paper, _refine(start, prob, n, middles), prob)
+        out = _refine(start, prob, n, middles)
+        if out is None:
+            continue
+        out = _clear(p, paper, out, prob)
+        if out.feasible and not any(
+                np.max(np.linalg.norm(out.points - other, axis=1)) < SAME_BASIN * prob.l0
+                for _, other in ends):
+            ends.append((out.objective, out.points))
         if out.feasible and (not best.feasible or out.objective < best.objective):
             best = out
-    return best
+    # The lead over the next distinct basin: refined where two were, else screened.
+    ends = sorted(value for value, _ in ends)
+    if len(ends) > 1 and ends[0] > 0:
+        lead = ends[1] / ends[0] - 1.0
+    else:
+        lead = values[len(starts)] / values[0] - 1.0 if len(values) > len(starts) and \
+            values[0] > 0 else math.inf
+    return best, lead
 
 
 def _refine(points: NDArray, prob: DetectionProblem, n: int,
-            middles: list[NDArray] | None = None) -> Outcome:
+            middles: list[NDArray] | None = None) -> Outcome | None:
     """SLSQP under the limits at MIDDLE_SEGMENTS (where fewer than n), then at n segments.
 
     The QP of SLSQP grows as the cube of the vertices: most of the shape is found at the
     middle level, where an iteration costs a fraction of one at n. A middle answer in the
     basin of one refined before (``middles``, SAME_BASIN) goes no further: on uniform20_0
     three screened basins met at the middle level and ended within 1e-7 of each other.
+    Returns None for such an answer.
     """
     if MIDDLE_SEGMENTS < n and len(points) - 1 < MIDDLE_SEGMENTS:
         out = refine_slsqp(resample(points, MIDDLE_SEGMENTS), prob, layouts=2)
@@ -178,7 +229,7 @@ def _refine(points: NDArray, prob: DetectionProblem, n: int,
             if out.feasible and any(
                     np.max(np.linalg.norm(out.points - other, axis=1)) < SAME_BASIN * prob.l0
                     for other in middles):
-                return dataclasses.replace(out, feasible=False)
+                return None
             middles.append(out.points)
         points = out.points
     out = refine_slsqp(resample(points, n), prob, max_iter=FINE_ITER, layouts=2)
@@ -220,7 +271,7 @@ def _clear(p: Problem, anchor: NDArray, out: Outcome, prob: DetectionProblem) ->
     return Outcome(points, h, prob.objective(points, h), True, out.rounds, out.evaluations)
 
 
-def _candidate(p: Problem, paper: Candidate, out: Outcome, status: str,
+def _candidate(p: Problem, paper: Candidate, out: Outcome, status: str, lead: float,
                bounded: DetectionProblem | None = None) -> Candidate:
     cfg = p.config
     points = out.points
@@ -230,4 +281,4 @@ def _candidate(p: Problem, paper: Candidate, out: Outcome, status: str,
         converged=True, cost=p.cost(points),
         angles=check_angles(points, cfg.max_pitch_deg, cfg.max_turn_deg),
         seed=f'{paper.seed}, detection', limit_check=p.check(points), objective=objective,
-        detection_status=status)
+        detection_status=status, basin_margin=lead)
