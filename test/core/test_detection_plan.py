@@ -163,3 +163,18 @@ def test_a_detection_replan_after_a_small_move_is_warm_and_as_good_as_cold():
     far = ThreatField.from_arrays(threats.positions + 5.0, threats.intensities)
     again = plan(far, s, t, box, cfg, warm_start=first)
     assert not again.warm and again.warm_note.startswith('cold')
+
+
+@pytest.mark.parametrize('model', MODELS[2:], ids=['sw1-ellipsoid', 'sw0-ellipsoid'])
+def test_a_folded_segment_adds_nothing_and_breaks_nothing(model):
+    pos = np.array([[50.0, 10.0, 50.0], [20.0, 60.0, 40.0]])
+    f = np.array([2e5, 3e5])
+    pts = np.array([[0.0, 0.0, 50.0], [40.0, 0.0, 50.0], [40.0, 0.0, 50.0], [100.0, 0, 50]])
+    lay = layout(pts, pos, f, model)
+    per, grad = compiled_hazard(pts, pos, f, model, lay)
+    ref, gref = hazard_and_gradient(pts, pos, f, model, lay)
+    assert np.all(np.isfinite(per)) and np.all(np.isfinite(grad))
+    assert np.allclose(per, ref, rtol=1e-12)
+    unfolded = np.delete(pts, 2, axis=0)
+    assert path_hazard(pts, pos, f, model).hazard == pytest.approx(
+        path_hazard(unfolded, pos, f, model).hazard, rel=1e-12)

@@ -141,6 +141,8 @@ def _hazard(points, positions, f, pair_seg, pair_thr, pair_span, node_piece, nod
     for m in range(node_t.shape[0]):
         piece = node_piece[m]
         s = pair_seg[piece]
+        if length[s] <= 0.0:
+            continue    # a folded segment: no length, no hazard, no gradient
         i = pair_thr[piece]
         t = node_t[m]
         ex = points[s + 1, 0] - points[s, 0]

@@ -141,7 +141,10 @@ def snr_parts(e: NDArray, g: NDArray, axes2: tuple[float, float, float],
     if aa == bb == cc:
         q = aa * gg
         return (q, 2.0 * aa * g, np.zeros_like(g)) if want_grad else (q, None, None)
+    # A folded segment (e = 0) has no length to weigh its hazard: any direction will do.
     ee = np.einsum('ij,ij->i', e, e)
+    e = np.where((ee > 0)[:, None], e, np.array([1.0, 0.0, 0.0]))
+    ee = np.where(ee > 0, ee, 1.0)
     eg = np.einsum('ij,ij->i', e, g)
     h2 = e[:, 0] ** 2 + e[:, 1] ** 2
     vertical = h2 <= 1e-24 * ee
