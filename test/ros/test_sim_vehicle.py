@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
+from visualization_msgs.msg import MarkerArray
 import yaml
 
 from node_harness import (domain_id, LATCHED, LATCHED_LOG, PYTHON, REPO, RosClient,
@@ -25,6 +26,7 @@ from threat_planner.core.trajectory import quaternion_yaw_pitch
 from threat_planner.flight.follow import join
 from threat_planner.ros.conversions import (moving_threats_from_pointcloud2, path_to_msg,
                                             stamp_to_ns)
+from threat_planner.ros.conversions.airspace import zones_from_markers
 from threat_planner.ros.publisher import EXIT_BAD_EVENTS
 
 DOMAIN = domain_id(101)
@@ -224,6 +226,36 @@ def test_publisher_plays_a_popup_a_move_and_a_goal_at_their_times(client, tmp_pa
                                    np.delete(scenario.threats.positions, 2, 0), atol=1e-4)
     assert (stamp_to_ns(goal.header.stamp) - t0) * 1e-9 >= 1.8
     assert 'event: add_threat at t=1.5' in log
+
+
+def test_publisher_plays_an_added_zone_on_no_fly_zones(client, tmp_path):
+    ns = '/tpz'
+    events = _events_file(tmp_path, [
+        {'t': 0.8, 'add_zone': {'type': 'sphere', 'center': [50.0, 50.0, 70.0],
+                                'radius': 9.0}},
+        {'t': 1.2, 'add_zone': {'type': 'sphere', 'center': [30.0, 60.0, 40.0],
+                                'radius': 4.0}},
+    ])
+    client.subscribe(f'{ns}/threats', PointCloud2, LATCHED_LOG)
+    client.subscribe(f'{ns}/no_fly_zones', MarkerArray, LATCHED_LOG)
+    proc = start_process(PUBLISHER + ['--ros-args', '-r', f'__ns:={ns}', '-p',
+                                      f'scenario:={SCENARIO_FILE}', '-p',
+                                      f'events_file:={events}'],
+                         DOMAIN, tmp_path / 'publisher.log')
+    try:
+        client.wait_for(f'{ns}/no_fly_zones',
+                        lambda m: len(zones_from_markers(m, 'map')) == 2, 30.0)
+        first = stamp_to_ns(client.messages[f'{ns}/threats'][0][1].header.stamp)
+        arrays = [m for _, m in client.messages[f'{ns}/no_fly_zones']]
+    finally:
+        assert stop_process(proc) == 0, (tmp_path / 'publisher.log').read_text()
+    zones = [zones_from_markers(m, 'map') for m in arrays]
+    assert [len(z) for z in zones] == [1, 2]
+    times = [(stamp_to_ns(m.markers[-1].header.stamp) - first) * 1e-9 for m in arrays]
+    assert 0.75 <= times[0] < 1.2 and times[1] >= 1.15, times
+    # The second message still holds the first zone: a message replaces the planner's.
+    assert zones[1][0].inside(np.array([[50.0, 50.0, 70.0]]))[0]
+    assert zones[1][1].inside(np.array([[30.0, 60.0, 40.0]]))[0]
 
 
 @pytest.mark.parametrize('events, words', [

@@ -18,9 +18,11 @@ geometry_msgs/PoseArray, with ``use_pose_array:=true``), ``start`` and ``goal_po
   start: at each event's time the picture is republished as it is then, with every
   threat where it is at that time (a threat with a velocity, the scenario's or an
   event's, is republished at 2 Hz as it moves, and a cloud in which one moves carries
-  every threat's ``vx vy vz``); a goal event publishes the new ``goal_pose``. Zone
-  events are not played (this node publishes no zones). A bad events file is refused
-  before anything is published: one line naming the field, exit code 2.
+  every threat's ``vx vy vz``); a goal event publishes the new ``goal_pose``; an
+  ``add_zone`` event publishes ``no_fly_zones`` (latched): the scenario's zones and every
+  zone added so far, since a ``no_fly_zones`` message replaces the planner's zones. A bad
+  events file is refused before anything is published: one line naming the field, exit
+  code 2.
 
 Start and goal are published at start-up and again whenever a new subscriber appears: a
 planner subscribes to them volatile (so that RViz's pose tools work) and would otherwise
@@ -40,11 +42,13 @@ from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
+from visualization_msgs.msg import MarkerArray
 
 from threat_planner.core.inputs.scenario import load_scenario, Scenario
 from threat_planner.errors import InputError
 from threat_planner.flight.playback import Playback
 from threat_planner.ros.conversions import pointcloud2_from_threats
+from threat_planner.ros.conversions.airspace import zones_to_markers
 from threat_planner.ros.process import run_node
 
 __all__ = ['ThreatDrift', 'ThreatPublisher', 'main']
@@ -215,6 +219,10 @@ class ThreatPublisher(Node):
             self._pose_pubs.append(('goal', self.create_publisher(
                 PoseStamped, f'{p}goal_pose', LATCHED), self._scenario.goal))
         self._matched = {id(pub): 0 for _, pub, _ in self._pose_pubs}
+        # Zones only where the events add some: a planner's own zones stay its own.
+        self._zone_pubs = [] if self._playback is None or not any(
+            e.kind == 'add_zone' for e in self._playback.events) else [
+            self.create_publisher(MarkerArray, f'{p}no_fly_zones', LATCHED) for p in prefixes]
 
         for _, pub, xyz in self._pose_pubs:
             self._publish_pose(pub, xyz)
@@ -237,10 +245,6 @@ class ThreatPublisher(Node):
             playback = Playback.from_file(self._scenario, path)
         except InputError as exc:
             raise _EventsFileError(f'events_file {path}: {exc}') from None
-        zones = sum(e.kind == 'add_zone' for e in playback.events)
-        if zones:
-            self.get_logger().warning(f'events_file: {zones} add_zone event(s) not played '
-                                      '(this node publishes no zones)')
         self.get_logger().info(f'events_file {path}: {len(playback.events)} events')
         return playback
 
@@ -259,10 +263,20 @@ class ThreatPublisher(Node):
                 for kind, pub, xyz in self._pose_pubs:
                     if kind == 'goal':
                         self._publish_pose(pub, xyz)
-            elif event.kind != 'add_zone':
+            elif event.kind == 'add_zone':
+                self._publish_zones()
+            else:
                 changed = True
         if changed or (self._playback.moving(t) and t - self._published_t >= MOVING_PERIOD_S):
             self._publish_threats()
+
+    def _publish_zones(self) -> None:
+        """Publish the scenario's zones and the events' so far on ``no_fly_zones``."""
+        air = self._scenario.airspace
+        zones = (tuple(air.zones) if air is not None else ()) + tuple(self._playback.zones)
+        msg = zones_to_markers(zones, self._frame, self._stamp())
+        for pub in self._zone_pubs:
+            pub.publish(msg)
 
     def _picture(self) -> tuple[NDArray, NDArray, NDArray | None]:
         """Return the threats to publish: positions (N, 3), intensities (N,), velocities.
