@@ -9,12 +9,17 @@ import sys
 from typing import Optional
 
 from threat_planner.core.inputs.config import PlannerConfig
+from threat_planner.core.inputs.scenario_detection import DETECTION_SETTINGS
 from threat_planner.core.inputs.settings import PLANNER_SETTINGS, Setting
 
 __all__ = ['ProgressBar', 'add_planner_options', 'config_from', 'output_file', 'overrides']
 
 #: Options whose flag inverts the setting (``--leave-box`` sets confine_to_box false).
 _INVERTED = {'confine_to_box': 'let the optimised path leave the bounds box'}
+#: Settings a scenario file may give (key ``speed`` and the ``detection`` block), which then
+#: stand in for the default: the scenario's key of each.
+SCENARIO_KEYS = {'speed_mps': 'speed',
+                 **{name: f'detection.{key}' for key, name in DETECTION_SETTINGS.items()}}
 
 
 def _cli_settings() -> list[Setting]:
@@ -39,7 +44,9 @@ def add_planner_options(parser: argparse.ArgumentParser, *, recorded: bool = Fal
             parser.add_argument(flag, dest=s.name, action='store_const',
                                 const=s.name not in _INVERTED, default=None, help=helptext)
             continue
-        default = '' if recorded else f' (default: {s.default})'
+        key = SCENARIO_KEYS.get(s.name)
+        default = '' if recorded else (
+            (f"; if not given, the scenario's {key}" if key else '') + f' (default: {s.default})')
         instead = ' instead of the recorded one' if recorded else ''
         kwargs = {'choices': s.choices} if s.choices else {'type': s.kind}
         metavar = None if s.choices else s.cli.upper().replace('-', '_')
@@ -56,12 +63,15 @@ def overrides(args: argparse.Namespace) -> dict[str, object]:
 def config_from(args: argparse.Namespace, scenario: Optional[object] = None) -> PlannerConfig:
     """Return the PlannerConfig of the command line's settings, validated.
 
-    A scenario's own ``speed`` [m/s] stands in for the default; ``--speed`` overrides it.
+    A scenario's own ``speed`` [m/s] and ``detection`` block (cost, max_detection,
+    scan_period, p_fa, swerling, rcs) stand in for the defaults; the options (``--speed``,
+    ``--cost``, ...) override them.
     """
     base = PlannerConfig()
     speed = getattr(scenario, 'speed', None)
     if speed is not None:
         base = replace(base, speed_mps=speed)
+    base = replace(base, **getattr(scenario, 'detection', {}))
     return replace(base, **overrides(args)).validated()
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from threat_planner.core.inputs.settings import PLANNER_SETTINGS
+from threat_planner.errors import InputError
 
 __all__ = ['PlannerConfig', 'TIMING_FIELDS']
 
@@ -94,11 +95,17 @@ class PlannerConfig:
     def validated(self) -> 'PlannerConfig':
         """Return self after checking every field against its declared range.
 
+        Also the one rule between fields: cost_model 'detection' plans from method 'best'
+        (its warm start, limits and optimiser), so it needs method 'best'.
+
         Raises:
             InputError: naming the field and its bad value.
         """
         for name, setting in PLANNER_SETTINGS.items():
             setting.check(getattr(self, name))
+        if self.cost_model == 'detection' and self.method != 'best':
+            raise InputError(f"cost_model: detection needs method best, got method "
+                             f"{self.method!r} (set method best, or cost_model paper)")
         return self
 
     def plans_like(self, other: 'PlannerConfig') -> bool:

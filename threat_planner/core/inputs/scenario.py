@@ -26,12 +26,30 @@ which a command line's ``--speed`` overrides); it times the path and changes no 
 A threat's ``velocity: [vx, vy, vz]`` [m/s] (finite, at most MAX_THREAT_SPEED; East,
 North, Up in a geodetic file) moves it in straight lines from t = 0 for a plan in time
 or a flight (:mod:`threat_planner.core.flight`); a static plan uses the positions as given.
+
+The block ``detection`` (issue 43) holds the radar model every plan's P_detect is reported
+under, and the choice of the cost; each key is a setting, which the command line's option
+overrides (as ``speed``)::
+
+    detection:
+      cost: detection        # cost_model, --cost: 'paper' (the default) or 'detection'
+      max_detection: 0.05    # max_detection, --max-detection: 0 < P <= 1 (1 = no bound)
+      speed: 20.0            # speed_mps, --speed [m/s]: the top-level speed, in one place
+      scan_period: 1.0       # scan_period_s, --scan-period [s]
+      p_fa: 1.0e-6           # p_fa, --p-fa: 0 < p_fa < 1
+      swerling: 1            # swerling, --swerling: 0 or 1
+      rcs: {ellipsoid: [3.0, 1.0, 0.5]}   # rcs, --rcs: or {constant: 1.0} [m^2]
+
+Every key is optional. The objective (``cost``, ``max_detection``) lives in the block, not
+at the top level: it is the detection model's. ``detection.speed`` and the top-level
+``speed`` are one setting; a file may give both only with the same value, and a saved
+scenario writes it at the top level. A bad value is refused in one line naming the key as
+written (``detection.swerling: must be 0 or 1, got 2``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import difflib
 import math
 import numbers
 from pathlib import Path
@@ -43,6 +61,8 @@ import yaml
 
 from threat_planner.core.geo.frames import Datum
 from threat_planner.core.inputs.geodetic import dem_terrain, frame_of, to_local
+from threat_planner.core.inputs.scenario_detection import (
+    BLOCK_ONLY, check_keys, DETECTION_SETTINGS, detection_of, file_block, speed_of)
 from threat_planner.core.inputs.settings import PLANNER_SETTINGS
 from threat_planner.core.inputs.yaml_threats import load_document
 from threat_planner.core.world.airspace import Airspace
@@ -68,6 +88,9 @@ class Scenario:
             setting's.
         velocities: Each threat's velocity (N, 3) [m/s] (key ``velocity``); zeros where a
             threat has none (None in the constructor: all still).
+        detection: The settings the ``detection`` block gives, by PlannerConfig field
+            (``cost_model``, ``max_detection``, ``scan_period_s``, ``p_fa``, ``swerling``,
+            ``rcs`` as the setting's text); its ``speed`` is :attr:`speed`. Empty: none.
     """
 
     name: str
@@ -81,9 +104,16 @@ class Scenario:
     datum: Optional[Datum] = None
     speed: Optional[float] = None
     velocities: Optional[np.ndarray] = None
+    detection: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        """Hold the velocities as an (N, 3) float array, zeros for None."""
+        """Hold the velocities as an (N, 3) float array, zeros for None; check detection."""
+        unknown = sorted(set(self.detection) - set(DETECTION_SETTINGS.values()))
+        if unknown:
+            raise InputError(f'detection: not a detection setting: {", ".join(unknown)} '
+                             f'(known: {", ".join(DETECTION_SETTINGS.values())})')
+        for name, value in self.detection.items():
+            PLANNER_SETTINGS[name].check(value)
         n = len(self.threats)
         vel = np.zeros((n, 3)) if self.velocities is None else np.array(
             self.velocities, dtype=float)
@@ -103,6 +133,8 @@ class Scenario:
                         for p, f in zip(self.threats.positions, self.threats.intensities)],
             **({} if self.speed is None else {'speed': self.speed}),
         }
+        if self.detection:
+            out['detection'] = file_block(self.detection)
         for t, v in zip(out['threats'], self.velocities):
             if np.any(v != 0):
                 t['velocity'] = v.tolist()
@@ -118,39 +150,13 @@ class Scenario:
 #: Keys a scenario file may hold; the airspace keys are read by the airspace layer.
 TOP_KEYS = ('name', 'frame_id', 'description', 'bounds', 'start', 'goal', 'threats',
             'threats_file', 'no_fly_zones', 'terrain', 'lethal_radius', 'datum',
-            'coordinates', 'speed')
+            'coordinates', 'speed', 'detection')
 #: Suffixes a ``threats_file`` may have.
 THREATS_FILE_SUFFIXES = ('.npy', '.csv')
 BOUNDS_KEYS = ('min', 'max')
 THREAT_KEYS = ('position', 'intensity', 'lethal_radius', 'velocity')
 #: Fastest threat a scenario may give [m/s] (the cruise speed's upper bound).
 MAX_THREAT_SPEED = 1000.0
-
-
-def _check_keys(mapping: dict, known: tuple, where: str, fail) -> None:
-    """Refuse an unknown (often misspelt) key, naming it and the nearest known one."""
-    for key in mapping:
-        if key in known:
-            continue
-        close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
-        hint = f'; did you mean "{close[0]}"?' if close else ''
-        # A key with control characters (a stray newline) is shown escaped: one line.
-        name = str(key) if str(key).isprintable() else repr(str(key))[1:-1]
-        raise fail(f'unknown field "{where}{name}"{hint} (known: {", ".join(known)})')
-
-
-def _speed(data: dict) -> Optional[float]:
-    """Return the file's cruise speed [m/s], checked as ``speed_mps``; None if absent."""
-    if 'speed' not in data:
-        return None
-    value = data['speed']
-    try:
-        PLANNER_SETTINGS['speed_mps'].check(value)
-    except InputError as exc:
-        # The file's key, not the setting's: the user wrote 'speed'.
-        rule, got = str(exc).split(': ', 1)[1].rsplit(', got ', 1)
-        raise InputError(f'speed: {rule} [m/s], got {got}') from None
-    return float(value)
 
 
 def _velocity(i: int, value: object) -> list[float]:
@@ -249,7 +255,7 @@ def _threat_rows(data: dict, base: Path | None, fail) -> tuple:
     for i, t in enumerate(threats):
         if not isinstance(t, dict) or 'position' not in t or 'intensity' not in t:
             raise fail(f'threats[{i}] needs "position" and "intensity"')
-        _check_keys(t, THREAT_KEYS, f'threats[{i}].', fail)
+        check_keys(t, THREAT_KEYS, f'threats[{i}].', fail)
         positions.append(t['position'])
         intensities.append(t['intensity'])
         lethal.append(t.get('lethal_radius', float('nan')))
@@ -278,7 +284,11 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
 
     if not isinstance(data, dict):
         raise fail('expected a mapping at the top level')
-    _check_keys(data, TOP_KEYS, '', fail)
+    for key in BLOCK_ONLY:
+        if key in data:
+            raise fail(f'unknown field "{key}"; it goes in the detection block: '
+                       f'"detection.{key}"')
+    check_keys(data, TOP_KEYS, '', fail)
     for key in ('bounds', 'start', 'goal'):
         if key not in data:
             raise fail(f'missing field "{key}"')
@@ -287,7 +297,7 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
     bounds = data['bounds']
     if not isinstance(bounds, dict) or 'min' not in bounds or 'max' not in bounds:
         raise fail('field "bounds" needs "min" and "max"')
-    _check_keys(bounds, BOUNDS_KEYS, 'bounds.', fail)
+    check_keys(bounds, BOUNDS_KEYS, 'bounds.', fail)
     base = None if source.startswith('<') else Path(source).parent
     positions, intensities, lethal, velocities = _threat_rows(data, base, fail)
     try:
@@ -317,14 +327,15 @@ def scenario_from_dict(data: object, source: str = '<dict>') -> Scenario:
             threat_positions=threat_field.positions)
         airspace.check_point('start', start)
         airspace.check_point('goal', goal)
-        speed = _speed(data)
+        speed = speed_of(data)
+        detection = detection_of(data)
     except InputError as exc:
         raise fail(str(exc)) from None
     except (TypeError, ValueError, OverflowError) as exc:
         raise fail(f'bad value ({exc})') from None
     return Scenario(str(data.get('name', Path(source).stem)), str(data.get('frame_id', 'map')),
                     str(data.get('description', '') or ''), box, start, goal, threat_field,
-                    airspace, datum, speed, velocities)
+                    airspace, datum, speed, velocities, detection)
 
 
 def load_scenario(path: str | Path) -> Scenario:

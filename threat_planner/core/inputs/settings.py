@@ -64,6 +64,9 @@ class Setting:
     parse : callable, optional
         ``parse(value, name)`` raising InputError for a string the kind alone allows but
         the setting does not (``rcs``).
+    rule_text : str, optional
+        The constraint in words where the kind and range say it badly (``swerling``: 'must
+        be 0 or 1', not 'an integer >= 0 and <= 1'); None to derive it.
 
     """
 
@@ -84,10 +87,13 @@ class Setting:
     non_empty: bool = False
     empty_ok: bool = False
     parse: Optional[Callable[[object, str], object]] = None
+    rule_text: Optional[str] = None
 
     @property
     def rule(self) -> str:
         """The constraint in words, as error messages and descriptors give it."""
+        if self.rule_text is not None:
+            return self.rule_text
         if self.choices is not None:
             return f'must be one of {", ".join(self.choices)}'
         if self.kind is str:
@@ -240,11 +246,11 @@ SETTINGS: tuple[Setting, ...] = (
             lo=0.0, hi=1.0, lo_open=True, hi_open=True, cli='p-fa'),
     Setting('swerling', int, 1,
             'Swerling case of the detection model: 0 (steady target) or 1 (fluctuating)',
-            lo=0, hi=1, cli='swerling'),
+            lo=0, hi=1, cli='swerling', rule_text='must be 0 or 1'),
     Setting('rcs', str, 'constant 1.0',
             "Radar cross-section of the UAV: 'constant S' [m^2] or 'ellipsoid A B C' "
             "(semi-axes [m] along the nose, the right wing and down)", cli='rcs',
-            parse=parse_rcs),
+            parse=parse_rcs, rule_text="must be 'constant S' or 'ellipsoid A B C'"),
     Setting('entry_candidates', int, 3, 'Network nodes tried as entry and as exit',
             lo=1, hi=64, cli='entry-candidates'),
     Setting('candidates', str, 'spread',
@@ -341,7 +347,12 @@ def _yaml_value(value: object) -> str:
         return value if value else "''"
     if isinstance(value, list):
         return '[' + ', '.join(repr(float(v)) for v in value) + ']'
-    return repr(value)
+    text = repr(value)
+    if isinstance(value, float) and 'e' in text and '.' not in text:
+        # YAML 1.1 (PyYAML) reads 1e-06 as a string; 1.0e-06 is a float in every reader.
+        mantissa, exponent = text.split('e')
+        text = f'{mantissa}.0e{exponent}'
+    return text
 
 
 def params_file_text(node_name: str = 'threat_planner') -> str:
