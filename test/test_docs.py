@@ -14,7 +14,7 @@ from threat_planner.ros.plan_service import PLAN_SERVICE, QUEUE_BOUND
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / 'README.md'
 DOCS = ROOT / 'docs'
-PAGES = ('method.md', 'node.md', 'bags.md', 'benchmarks.md', 'flight.md')
+PAGES = ('method.md', 'node.md', 'bags.md', 'benchmarks.md', 'flight.md', 'detection.md')
 README_LINES = 200
 INTERFACE_HEADING = '## Interface of the node'
 
