@@ -36,7 +36,7 @@ MAX_PIECES = 256
 #: excess is below 1e-12 P_fa |ln P_fa| per scan).
 NEGLIGIBLE_SNR = 1e-12
 #: Relative change of H at which :func:`path_hazard` stops doubling the pieces.
-TOLERANCE = 1e-10
+TOLERANCE = 1e-9
 #: SNR at which a radar's range stands in for the closest approach of a pair that passes
 #: closer (P_d is flat inside it).
 RANGE_SNR = 1.0
@@ -44,7 +44,14 @@ RANGE_SNR = 1.0
 #: Nodes of a short piece (no longer than SHORT of its scale), where the integrand is
 #: nearly a polynomial of low degree: half the work of a full one.
 SHORT_ORDER = 4
-SHORT = 0.15
+SHORT = 0.05
+#: Pieces no longer than this of their scale are exact with their first layout (8 nodes
+#: over at most 0.3 of the distance: an error ~ 0.15^16 of their excess).
+SETTLED = 0.3
+#: ... and of a piece no longer than FAR of its scale (a far radar; its 4-point error
+#: there is (FAR / 2)^8 / 3e4 ~ 1e-20 of its excess, the 2-point one ~ 1e-12): a quarter.
+FAR_ORDER = 2
+FAR = 0.003
 
 
 def _rule(order: int) -> tuple[NDArray, NDArray]:
@@ -52,7 +59,7 @@ def _rule(order: int) -> tuple[NDArray, NDArray]:
     return 0.5 * (nodes + 1.0), 0.5 * weights
 
 
-_RULES = {order: _rule(order) for order in (ORDER, SHORT_ORDER)}
+_RULES = {order: _rule(order) for order in (ORDER, SHORT_ORDER, FAR_ORDER)}
 
 
 @dataclass(frozen=True)
@@ -113,26 +120,9 @@ def _closest(a: NDArray, b: NDArray, q: NDArray) -> NDArray:
     return np.linalg.norm(a + t[:, None] * d - q, axis=1)
 
 
-def layout(points: NDArray, positions: NDArray, intensities: NDArray, model: DetectionModel,
-           pieces: tuple | None = None, refine: int = 1) -> Layout:
-    """Lay out the quadrature of a path's excess hazard.
-
-    Parameters
-    ----------
-    points : ndarray
-        The polyline (M, 3) [m].
-    positions, intensities : ndarray
-        Threats (N, 3) [m] and F (N,).
-    model : DetectionModel
-        The radar model.
-    pieces : tuple, optional
-        ``(segment, threat, f0, f1)`` of the seen pieces (terrain masking,
-        :func:`threat_planner.core.cost.masking.visible_pieces`); None: every threat sees
-        every segment whole.
-    refine : int
-        Pieces per quadrature piece (each split in `refine` equal parts).
-
-    """
+def _pairs(points: NDArray, positions: NDArray, intensities: NDArray, model: DetectionModel,
+           pieces: tuple | None) -> tuple:
+    """Each seen piece's (seg, thr, f0, f1, length [m], scale [m], kept, largest SNR)."""
     points = np.asarray(points, float)
     a, b = points[:-1], points[1:]
     n_seg, n_thr = len(a), len(positions)
@@ -153,7 +143,37 @@ def layout(points: NDArray, positions: NDArray, intensities: NDArray, model: Det
         top = np.where(near > 0, (reach / np.maximum(near, 1e-300)) ** 4, np.inf)
     length = np.linalg.norm(pb - pa, axis=1)
     keep = (top >= NEGLIGIBLE_SNR) & (length > 0)
-    scale = np.maximum(near, reach / RANGE_SNR ** 0.25 * 0.25)
+    # Inside the range at the smallest aspect's RCS, P_d is flat: no finer than that.
+    inner = (np.asarray(intensities, float)[thr] * model.smallest_rcs / RANGE_SNR) ** 0.25
+    scale = np.maximum(near, 0.25 * inner)
+    return seg, thr, f0, f1, length, scale, keep, top
+
+
+def layout(points: NDArray, positions: NDArray, intensities: NDArray, model: DetectionModel,
+           pieces: tuple | None = None, refine: int = 1) -> Layout:
+    """Lay out the quadrature of a path's excess hazard.
+
+    Parameters
+    ----------
+    points : ndarray
+        The polyline (M, 3) [m].
+    positions, intensities : ndarray
+        Threats (N, 3) [m] and F (N,).
+    model : DetectionModel
+        The radar model.
+    pieces : tuple, optional
+        ``(segment, threat, f0, f1)`` of the seen pieces (terrain masking,
+        :func:`threat_planner.core.cost.masking.visible_pieces`); None: every threat sees
+        every segment whole.
+    refine : int
+        Pieces per quadrature piece (each split in `refine` equal parts).
+
+    """
+    return _layout(_pairs(points, positions, intensities, model, pieces), refine)
+
+
+def _layout(pairs: tuple, refine: int) -> Layout:
+    seg, thr, f0, f1, length, scale, keep, _ = pairs
     count = np.clip(np.ceil(length / (PIECE * scale)), 1, MAX_PIECES).astype(np.int64)
     count = np.where(keep, count * int(refine), 0)
     piece = np.repeat(np.arange(len(seg)), count)
@@ -161,9 +181,10 @@ def layout(points: NDArray, positions: NDArray, intensities: NDArray, model: Det
     j = np.arange(len(piece)) - first[piece]
     width = (f1 - f0)[piece] / count[piece]
     lo = f0[piece] + j * width
-    short = (length / (PIECE * scale))[piece] / count[piece] * PIECE <= SHORT
+    ratio = (length / scale)[piece] / count[piece]
+    far, short = ratio <= FAR, (ratio > FAR) & (ratio <= SHORT)
     parts = []
-    for order, pick in ((SHORT_ORDER, short), (ORDER, ~short)):
+    for order, pick in ((FAR_ORDER, far), (SHORT_ORDER, short), (ORDER, ratio > SHORT)):
         nodes, weights = _RULES[order]
         parts.append((np.repeat(piece[pick], order),
                       (lo[pick, None] + nodes[None, :] * width[pick, None]).reshape(-1),
@@ -171,6 +192,10 @@ def layout(points: NDArray, positions: NDArray, intensities: NDArray, model: Det
     node_piece, node_t, node_w = (np.concatenate(x) for x in zip(*parts))
     return Layout(seg=seg, thr=thr, f0=f0, f1=f1, node_piece=node_piece, node_t=node_t,
                   node_w=node_w)
+
+
+def _subset(pairs: tuple, pick: NDArray) -> tuple:
+    return tuple(x[pick] for x in pairs)
 
 
 def hazard_and_gradient(points: NDArray, positions: NDArray, intensities: NDArray,
@@ -227,15 +252,29 @@ def hazard_and_gradient(points: NDArray, positions: NDArray, intensities: NDArra
 
 def path_hazard(points: NDArray, positions: NDArray, intensities: NDArray,
                 model: DetectionModel, pieces: tuple | None = None) -> DetectionReport:
-    """The exact cumulative detection of a polyline: its layout doubled until H settles."""
+    """The exact cumulative detection of a polyline.
+
+    Pieces no longer than SETTLED of their scale, out of their radar's range, are summed
+    once; the others' layout is
+    doubled until H changes by less than TOLERANCE (10,000 threats: 1.6 s when every pair
+    was doubled). Against scipy's quad on 20 threats: 1e-10 (ellipsoid, Swerling 0).
+    """
     positions = np.asarray(positions, float).reshape(-1, 3)
     if len(points) < 2 or len(positions) == 0:
         return DetectionReport(0.0, 0.0, np.zeros(len(positions)))
+    pairs = _pairs(points, positions, intensities, model, pieces)
+    length, scale, top = pairs[4], pairs[5], pairs[7]
+    # Beyond a radar's range (SNR < 1 all along) P_d is smooth on the distance's scale;
+    # inside it, a steady target's P_d rises from P_fa to 1 over a few % of it.
+    settled = (length <= SETTLED * scale) & (top < 1.0)
+    far, _ = hazard_and_gradient(points, positions, intensities, model,
+                                 _layout(_subset(pairs, settled), 1), want_grad=False)
+    near_pairs = _subset(pairs, ~settled)
     refine, previous = 1, None
     while True:
         per, _ = hazard_and_gradient(points, positions, intensities, model,
-                                     layout(points, positions, intensities, model, pieces,
-                                            refine), want_grad=False)
+                                     _layout(near_pairs, refine), want_grad=False)
+        per = per + far
         total = float(per.sum())
         if previous is not None and abs(total - previous) <= TOLERANCE * max(total, 1e-300):
             break

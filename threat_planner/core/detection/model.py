@@ -114,6 +114,14 @@ class DetectionModel:
         a, b, c = self.rcs_values
         return math.pi * (a * b * c) ** 2 / min(a, b, c) ** 4
 
+    @property
+    def smallest_rcs(self) -> float:
+        """Smallest sigma from any aspect [m^2] (inside its range P_d is flat)."""
+        if self.rcs_kind == 'constant':
+            return float(self.rcs_values[0])
+        a, b, c = self.rcs_values
+        return math.pi * (a * b * c) ** 2 / max(a, b, c) ** 4
+
     def rcs(self, nose: NDArray, line_of_sight: NDArray) -> NDArray:
         """sigma [m^2] seen along unit lines of sight (N, 3) from segments along `nose`."""
         g = np.asarray(line_of_sight, float)
