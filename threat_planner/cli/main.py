@@ -18,6 +18,7 @@ from threat_planner._version import __version__
 from threat_planner.cli.bag import add_bag_commands
 from threat_planner.cli.batch import (add_batch_command, add_robust_options, robust_plan,
                                       robust_summary)
+from threat_planner.cli.detection_figure import add_detection_plot_option, detection_line
 from threat_planner.cli.exports import add_export_options, check_exports, export_plan
 from threat_planner.cli.fly import (add_fly_command, add_start_heading, enter_plan,
                                     refuse_heading_with, start_heading)
@@ -73,6 +74,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
               f'{result.clearance.terrain_m:.3f} m above the floor')
     print(f'  flight: {result.speed_mps:g} m/s, ETA {result.eta_s:.1f} s over '
           f'{result.eta_s * result.speed_mps:.1f} m')
+    print(detection_line(result))
     print(f'  time: {result.timings_ms["total_ms"]:.1f} ms ({stages} ms)')
     robust = {}
     if args.robust is not None:
@@ -94,6 +96,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
                   result.path, title=f'{scenario.name}: {cfg.method}, w={cfg.w:g}, '
                                      f'J={c.J:.1f}',
                   airspace=scenario.airspace or None)
+    if args.detection_plot:
+        from threat_planner.cli.detection_figure import plot_detection
+        plot_detection(args.detection_plot, result,
+                       title=f'{scenario.name}: {cfg.method}, cost {result.cost_model}')
     return 0
 
 
@@ -101,7 +107,7 @@ def _cmd_paper(args: argparse.Namespace) -> int:
     from threat_planner.cli.reproduction import reproduce, W_SWEEP
     scenario = load_scenario(args.scenario)
     cfg = config_from(args, scenario)
-    bar = ProgressBar('paper', 3 + len(W_SWEEP))
+    bar = ProgressBar('paper', 4 + len(W_SWEEP))   # + the detection table
     tables = reproduce(scenario, args.out, cfg, progress=bar.tick)
     bar.close()
     for name, body in tables.items():
@@ -171,6 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
     planner_options(p_plan)
     p_plan.add_argument('--json', help='write the result as JSON here')
     p_plan.add_argument('--plot', help='write a 3-D figure (PNG) here')
+    add_detection_plot_option(p_plan)
     p_plan.add_argument('--record', metavar='OUT.mcap',
                         help='record the run to MCAP as the planner node would (parameters, '
                              'start, goal_pose, threats as float32 PointCloud2, and the '

@@ -1,5 +1,7 @@
 """Reproduction of the paper's Section IV on a scenario: Tables I-III, Case 3, figures.
 
+And issue 43's detection table: the paper-cost plan against the detection-cost plan.
+
 Node ids in the tables are this project's 0-based network ids (the paper numbers its own
 network from 1; networks of different threat sets are not comparable id by id).
 """
@@ -43,6 +45,44 @@ def _how(config: PlannerConfig) -> str:
     return (f'Network: {net}.\n\nEntry/exit candidates (Table I, II): {cand}. Cells with '
             'equal J are routes that the mass-spring smoothing at k = 1000 brings to the same '
             'rest state (the same side of every threat).')
+
+
+def detection_rows(scenario: Scenario, config: PlannerConfig = PlannerConfig()) -> list[dict]:
+    """Plan a field with the paper cost and with the detection cost, side by side (issue 43).
+
+    Both are method best at ``config.w``, under the config's radar model. Each row:
+    ``cost`` ('paper' or 'detection'), ``P_detect``, ``H``, ``length_m``, ``J`` (the
+    paper's cost of the path), ``objective`` (w H + (1 - w) L / L_0, the detection
+    plan's objective, computed for both), ``status`` (a bound's status, '' for none).
+    """
+    th, s, g, box = scenario.threats, scenario.start, scenario.goal, scenario.box
+    l0 = float(np.linalg.norm(np.asarray(g, float) - np.asarray(s, float)))
+    rows = []
+    for cost in ('paper', 'detection'):
+        r = plan(th, s, g, box, replace(config, method='best', cost_model=cost),
+                 airspace=scenario.airspace or None)
+        d = r.detection
+        length = float(np.linalg.norm(np.diff(r.path, axis=0), axis=1).sum())
+        rows.append({'cost': cost, 'P_detect': float(d.p_detect), 'H': float(d.hazard),
+                     'length_m': length, 'J': float(r.cost.J),
+                     'objective': config.w * float(d.hazard) + (1 - config.w) * length / l0,
+                     'status': r.detection_status})
+    return rows
+
+
+def detection_table(scenario: Scenario, config: PlannerConfig = PlannerConfig()) -> str:
+    """Return the Markdown table of :func:`detection_rows`, with the P_detect change."""
+    rows = detection_rows(scenario, config)
+    paper_p = rows[0]['P_detect']
+    body = []
+    for row in rows:
+        change = ('' if row['cost'] == 'paper' or paper_p <= 0 else
+                  f"{100 * (row['P_detect'] - paper_p) / paper_p:+.1f} %")
+        body.append([row['cost'], f"{row['P_detect']:.4g}", f"{row['H']:.4g}",
+                     f"{row['length_m']:.1f}", f"{row['J']:.1f}", f"{row['objective']:.6g}",
+                     change, row['status'] or '-'])
+    return _table(['cost minimised', 'P_detect', 'H', 'length [m]', 'J',
+                   'w H + (1 - w) L / L_0', 'P_detect vs paper', 'bound'], body)
 
 
 def reproduce(scenario: Scenario, out_dir: str | Path, config: PlannerConfig = PlannerConfig(),
@@ -110,11 +150,17 @@ def reproduce(scenario: Scenario, out_dir: str | Path, config: PlannerConfig = P
             initial_path=rr.initial_path, path=rr.path,
             title=f'w={w}, k={rr.k:.0f}, J={rr.cost.J:.1f} (cf. {name.replace("fig", "Fig. ")})'))
 
+    tick('detection table')
+    w_det = config.w
+    table_d = detection_table(scenario, config)
+
     tables = {
         'Table I: J per entry/exit pair (w=0.5, k=1000)': table1,
         'Table II: best entry and exit per w (k=1000)': table2,
         'Table III: former vs improved Dijkstra node sequences (k=1000)': table3,
         'Case 3: best k per w (least J among angle-feasible paths)': table_k,
+        f'Detection: paper-cost plan vs detection-cost plan (method best, w={w_det:g})':
+            table_d,
     }
     text = f'# Paper Section IV on scenario {scenario.name}\n\n' + _how(base) + '\n\n'
     text += '\n\n'.join(

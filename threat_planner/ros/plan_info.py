@@ -7,13 +7,19 @@ from __future__ import annotations
 
 from typing import Mapping, Optional
 
+import numpy as np
+
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray
 
 from threat_planner.core.result import PlanResult
 from threat_planner.ros.conversions import plan_info_msg, stamp_to_ns
 
-__all__ = ['input_values', 'plan_done_info', 'plan_error_info', 'plan_timeout_info']
+__all__ = ['detection_top', 'detection_values', 'input_values', 'plan_done_info',
+           'plan_error_info', 'plan_timeout_info']
+
+#: Threats named in ``detection_top``: the largest shares of H.
+DETECTION_TOP = 3
 
 
 def plan_error_info(values: Mapping[str, object], seq: int, source: str, error: str,
@@ -174,5 +180,41 @@ def _result_values(result: PlanResult, n_threats: int) -> dict[str, object]:
         c = result.clearance
         values['clearance_zones_m'] = c.zones_m
         values['clearance_terrain_m'] = c.terrain_m
+    values.update(detection_values(result))
     values.update(result.timings_ms)
+    return values
+
+
+def detection_top(per_threat, n: int = DETECTION_TOP) -> str:
+    """Return the `n` largest shares H_i / H as ``'index:share'``, largest first, comma-separated.
+
+    ``''`` when H is 0 (no threats, or none seen).
+    """
+    per = np.asarray(per_threat, float).ravel()
+    total = float(per.sum())
+    if not (total > 0.0 and np.isfinite(total)):
+        return ''
+    order = np.argsort(-per, kind='stable')[:n]
+    return ','.join(f'{int(i)}:{per[i] / total:.4g}' for i in order)
+
+
+def detection_values(result: PlanResult) -> dict[str, object]:
+    """``plan_info``'s detection keys of a plan (issue 43): every plan reports them.
+
+    ``cost_model``, ``P_detect``, ``H``, ``detection_top`` (:func:`detection_top`), and
+    ``objective`` / ``detection_status`` when the plan has them; ``{'cost_model': ...}``
+    alone for a plan that keeps no threats to report under.
+    """
+    values: dict[str, object] = {'cost_model': result.cost_model}
+    try:
+        report = result.detection
+    except ValueError:
+        return values
+    values['P_detect'] = float(report.p_detect)
+    values['H'] = float(report.hazard)
+    values['detection_top'] = detection_top(report.per_threat)
+    if result.objective is not None:
+        values['objective'] = float(result.objective)
+    if result.detection_status:
+        values['detection_status'] = result.detection_status
     return values
