@@ -61,7 +61,7 @@ def test_a_paper_plan_reports_its_detection_exactly_in_plan_info(result, scenari
     np.testing.assert_allclose(shares, per[idx] / report.hazard, rtol=1e-3)
     assert shares == sorted(shares, reverse=True) and sum(shares) <= 1.0 + 1e-3
     # A paper plan has no detection objective or bound to report.
-    assert 'detection_status' not in values and 'objective' not in values
+    assert 'detection_status' not in values and 'detection_objective' not in values
 
 
 def test_a_detection_plan_reports_its_objective_and_its_bound_status(result, scenario):
@@ -69,7 +69,7 @@ def test_a_detection_plan_reports_its_objective_and_its_bound_status(result, sce
                       detection_status='unmet: no path within the limits has P_detect <= 1e-09')
     values = _info(bounded, len(scenario.threats))
     assert values['cost_model'] == 'detection'
-    assert float(values['objective']) == 0.75
+    assert float(values['detection_objective']) == 0.75
     assert values['detection_status'] == ('unmet: no path within the limits has '
                                           'P_detect <= 1e-09')
     assert float(values['P_detect']) == result.detection.p_detect

@@ -202,7 +202,8 @@ def detection_values(result: PlanResult) -> dict[str, object]:
     """``plan_info``'s detection keys of a plan (issue 43): every plan reports them.
 
     ``cost_model``, ``P_detect``, ``H``, ``detection_top`` (:func:`detection_top`), and
-    ``objective`` / ``detection_status`` when the plan has them; ``{'cost_model': ...}``
+    ``detection_objective`` (the minimised w H + (1 - w) L / L_0) / ``detection_status``
+    when the plan has them; ``{'cost_model': ...}``
     alone for a plan that keeps no threats to report under.
     """
     values: dict[str, object] = {'cost_model': result.cost_model}
@@ -214,7 +215,7 @@ def detection_values(result: PlanResult) -> dict[str, object]:
     values['H'] = float(report.hazard)
     values['detection_top'] = detection_top(report.per_threat)
     if result.objective is not None:
-        values['objective'] = float(result.objective)
+        values['detection_objective'] = float(result.objective)
     if result.detection_status:
         values['detection_status'] = result.detection_status
     return values
