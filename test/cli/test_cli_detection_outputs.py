@@ -34,10 +34,9 @@ def test_plan_prints_one_detection_line_matching_its_json_and_writes_the_figure(
     per = np.asarray(d['per_threat'])
     i = int(np.argmax(per))
     assert f"P_detect={d['P_detect']:.4g}" in line and f"H={d['H']:.4g}" in line
-    assert f'largest share {100 * per[i] / d["H"]:.1f} % (threat {i})' in line
-    # The model it is reported under: the defaults.
-    assert line.endswith('cost paper; swerling 1, rcs constant 1, p_fa 1e-06, T 1 s, '
-                         'v 20 m/s'), line
+    assert f'(largest: threat {i}, {100 * per[i] / d["H"]:.1f} % of H)' in line
+    # The model it is reported under: the defaults; a paper plan has no bound status.
+    assert line.endswith(') swerling 1, rcs constant 1, p_fa 1e-06, T 1 s, v 20 m/s'), line
     data = png.read_bytes()
     assert data[:8] == PNG and len(data) > 10_000
 
@@ -45,12 +44,20 @@ def test_plan_prints_one_detection_line_matching_its_json_and_writes_the_figure(
 def test_a_detection_plan_names_its_cost_and_model_and_draws_its_figure(tmp_path):
     png = tmp_path / 'sub' / 'det.png'   # a missing folder is made
     p = _run('plan', DATA / 'uniform20_0.yaml', '--n-points', '20', '--cost', 'detection',
-             '--swerling', '0', '--rcs', 'ellipsoid 3 1 0.5', '--detection-plot', png)
+             '--swerling', '0', '--rcs', 'ellipsoid 3 1 0.5', '--max-detection', '1e-12',
+             '--detection-plot', png)
     assert p.returncode == 0, p.stderr
     line, = _detection_lines(p.stdout)
-    assert 'cost detection;' in line
-    assert 'swerling 0, rcs ellipsoid 3 1 0.5, p_fa 1e-06' in line
+    # The model, then the bound's status: 1e-12 cannot be met on this field.
+    assert ' swerling 0, rcs ellipsoid 3 1 0.5, p_fa 1e-06, T 1 s, v 20 m/s; status: unmet' in line
     assert png.read_bytes()[:8] == PNG
+
+
+def test_dot_areas_follow_f():
+    from threat_planner.cli.detection_figure import dot_sizes
+    np.testing.assert_allclose(dot_sizes([1.0, 2.0, 4.0], 8.0, 160.0), [40.0, 80.0, 160.0])
+    assert list(dot_sizes([0.001, 1.0], 8.0, 160.0)) == [8.0, 160.0]   # a floor, visible
+    assert list(dot_sizes([0.0, 0.0], 8.0, 160.0)) == [8.0, 8.0]
 
 
 def test_a_plan_without_the_option_writes_no_detection_figure(tmp_path):

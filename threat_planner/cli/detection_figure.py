@@ -5,7 +5,7 @@
 * :func:`plot_detection` (``--detection-plot FILE.png``): left, P_d per scan of each threat
   along the path against the distance flown (the threats with more than
   :data:`MATTERS` of H in colour, the rest grey); right, the path in plan view coloured by
-  the local hazard rate sum_i P_d,i / (v T) [1/m], the threats as dots.
+  the local hazard rate sum_i P_d,i / (v T) [1/m], the threats as dots of area ~ F.
 
 matplotlib is imported only to draw, so the print line costs no import.
 """
@@ -20,7 +20,7 @@ import numpy as np
 from threat_planner.core.detection.hazard import profile
 from threat_planner.core.detection.model import DetectionModel
 
-__all__ = ['MATTERS', 'add_detection_plot_option', 'detection_line', 'model_text',
+__all__ = ['MATTERS', 'add_detection_plot_option', 'detection_line', 'dot_sizes', 'model_text',
            'plot_detection', 'report_model']
 
 #: Share of H above which a threat is drawn in colour in the P_d panel.
@@ -50,20 +50,29 @@ def model_text(model: DetectionModel) -> str:
 def detection_line(result) -> str:
     """Return the plan summary's detection line: P_detect, H, the largest share, the model.
 
-    ``  detection: P_detect=1.632e-04 H=1.633e-04, largest share 35.2 % (threat 4);
-    cost paper; swerling 1, rcs constant 1, p_fa 1e-06, T 1 s, v 20 m/s`` (one line),
-    with the bound's status at the end when a detection plan has one.
+    ``  detection: P_detect=0.0001632 H=0.0001633 (largest: threat 4, 35.2 % of H)
+    swerling 1, rcs constant 1, p_fa 1e-06, T 1 s, v 20 m/s`` (one line), with
+    ``; status: ...`` at the end when a detection plan's bound has one.
     """
     report = result.detection
     per = np.asarray(report.per_threat, float)
     if len(per) and report.hazard > 0:
         i = int(np.argmax(per))
-        share = f'largest share {100.0 * per[i] / report.hazard:.1f} % (threat {i})'
+        share = f'(largest: threat {i}, {100.0 * per[i] / report.hazard:.1f} % of H)'
     else:
-        share = 'no threat seen'
-    status = f'; bound: {result.detection_status}' if result.detection_status else ''
-    return (f'  detection: P_detect={report.p_detect:.4g} H={report.hazard:.4g}, {share}; '
-            f'cost {result.cost_model}; {model_text(report_model(result))}{status}')
+        share = '(no threat seen)'
+    status = f'; status: {result.detection_status}' if result.detection_status else ''
+    return (f'  detection: P_detect={report.p_detect:.4g} H={report.hazard:.4g} {share} '
+            f'{model_text(report_model(result))}{status}')
+
+
+def dot_sizes(intensities, smallest: float = 8.0, largest: float = 160.0):
+    """Marker areas [pt^2] of the threats' dots, in proportion to F (the largest F: `largest`)."""
+    f = np.abs(np.asarray(intensities, float).ravel())
+    top = float(f.max()) if len(f) else 0.0
+    if not (top > 0.0 and np.isfinite(top)):
+        return np.full(len(f), smallest)
+    return np.maximum(largest * f / top, smallest)
 
 
 def plot_detection(path_png: str | Path, result, title: str = '') -> Path:
@@ -127,10 +136,11 @@ def plot_detection(path_png: str | Path, result, title: str = '') -> Path:
     fig.colorbar(lines, ax=ax_m, label='hazard rate sum_i P_d,i / (vT) [1/m]')
     if len(threats):
         pos = threats.positions
-        ax_m.scatter(pos[:, 0], pos[:, 1], s=18, color='0.55', edgecolors='k',
-                     linewidths=0.3, label='threats', zorder=3)
+        size = dot_sizes(threats.intensities)
+        ax_m.scatter(pos[:, 0], pos[:, 1], s=size, color='0.55', edgecolors='k',
+                     linewidths=0.3, label='threats (dot area ~ F)', zorder=3)
         if len(matters):
-            ax_m.scatter(pos[matters, 0], pos[matters, 1], s=40, color='tab:red',
+            ax_m.scatter(pos[matters, 0], pos[matters, 1], s=size[matters], color='tab:red',
                          edgecolors='k', linewidths=0.4, zorder=4,
                          label=f'> {100 * MATTERS:g} % of H')
             for i in matters[:10]:
