@@ -72,7 +72,7 @@ def test_paper_adds_a_detection_table_where_the_detection_plan_wins_its_objectiv
     assert p.returncode == 0, p.stderr
     text = (tmp_path / 'tables.md').read_text()
     for where in (p.stdout, text):
-        assert 'Detection: paper-cost plan vs detection-cost plan' in where
+        assert 'Detection: paper-cost plan (w=0.5) vs detection-cost plan (w=0.999)' in where
     section = text.split('## Detection:')[1].split('\n## ')[0]
     rows = {r[0]: r for r in (
         [c.strip() for c in line.strip('|').split('|')]
@@ -80,12 +80,24 @@ def test_paper_adds_a_detection_table_where_the_detection_plan_wins_its_objectiv
     assert set(rows) == {'paper', 'detection'}
     header, = [[c.strip() for c in line.strip('|').split('|')]
                for line in section.splitlines() if line.startswith('| cost minimised')]
-    assert header[1:5] == ['P_detect', 'H', 'length [m]', 'J']
+    assert header[1:7] == ['w', 'P_detect', 'H', 'length [m]', 'J (w=0.5)',
+                           'w H + (1 - w) L / L_0 (w=0.999)']
+    assert rows['paper'][1] == '0.5' and rows['detection'][1] == '0.999 [1]'
+    assert '[1] Not the paper\'s w = 0.5' in section   # the footnote on w
     for row in rows.values():
-        p_detect, h = float(row[1]), float(row[2])
+        p_detect, h = float(row[2]), float(row[3])
         assert 0 < p_detect < 1 and abs(p_detect - (1 - np.exp(-h))) <= 1e-3 * p_detect
-        assert float(row[3]) > 0 and float(row[4]) > 0
+        assert float(row[4]) > 0 and float(row[5]) > 0
     # The detection plan minimises w H + (1 - w) L / L_0: no worse there than the paper's.
-    assert float(rows['detection'][5]) <= float(rows['paper'][5]) * (1 + 1e-6)
+    assert float(rows['detection'][6]) <= float(rows['paper'][6]) * (1 + 1e-6)
+    assert 'Note: the detection plan' not in section
     # The paper's cost J is what the paper-cost plan minimises: no worse there either.
-    assert float(rows['paper'][4]) <= float(rows['detection'][4]) * (1 + 1e-3)
+    assert float(rows['paper'][5]) <= float(rows['detection'][5]) * (1 + 1e-3)
+
+
+def test_the_table_says_when_the_detection_plan_loses_its_own_objective():
+    from threat_planner.cli.reproduction import detection_warning
+    paper = {'cost': 'paper', 'objective': 0.00255}
+    assert detection_warning([paper, {'cost': 'detection', 'objective': 0.00254}]) == ''
+    note = detection_warning([paper, {'cost': 'detection', 'objective': 0.00344}])
+    assert 'worse basin' in note and '0.00344' in note and '0.00255' in note
