@@ -28,6 +28,8 @@ SUITES: dict[str, tuple[str, str, str]] = {
                    'first plan after an install and in a new process: CLI, plan(), node'),
     'crowded_fields': ('bench.suites.crowded_fields', 'main',
                        'best on fresh crowded (or random) fields against the in-box yardstick'),
+    'detection': ('bench.suites.detection', 'main',
+                  'issue 43: detection plans against paper plans and an SLSQP yardstick'),
     'dds_discovery': ('bench.suites.dds_discovery', 'main',
                       "planner_node's first path with its discovery profile and without"),
     'faults': ('bench.suites.faults', 'main',
