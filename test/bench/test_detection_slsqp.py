@@ -17,7 +17,7 @@ def test_gradient_matches_central_differences():
         a[i, k] += 1e-5
         b[i, k] -= 1e-5
         fd = (dy.hazard(a, q, f, intervals=32) - dy.hazard(b, q, f, intervals=32)) / 2e-5
-        assert abs(g[i, k] - fd) <= 1e-6 * abs(fd) + 1e-14
+        assert abs(g[i, k] - fd) <= 1e-4 * abs(fd) + 1e-11  # FD of H ~ 1e-5 at rounding
 
 
 def test_far_field_is_the_false_alarm_floor():
