@@ -53,7 +53,8 @@ def run_case(family: str, n: int, k: int, seed: int, limits: dict) -> list[dict]
     line = np.array([field.start, field.goal])
     rng = np.random.default_rng([seed, n, k])
     bent = dy.resample(line, 40)
-    bent[1:-1] += rng.normal(scale=0.05 * np.linalg.norm(field.goal - field.start) / 3, size=(39, 3))
+    spread = 0.05 * np.linalg.norm(field.goal - field.start) / 3
+    bent[1:-1] += rng.normal(scale=spread, size=(39, 3))
     bent[1:-1] = np.clip(bent[1:-1], field.lo, field.hi)
     for w in WS:
         det, det_ms = _plan(field, cost_model='detection', method='best', w=w)

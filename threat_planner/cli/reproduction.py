@@ -112,7 +112,7 @@ def detection_table(scenario: Scenario, config: PlannerConfig = PlannerConfig(),
 
 
 def detection_warning(rows: list[dict]) -> str:
-    """A sentence when the detection plan does worse on its own objective than the paper's.
+    """Return a sentence when the detection plan does worse on its own objective than the paper's.
 
     Then the detection optimiser stopped in a worse basin than the paper-cost path offers
     (its warm start is method best's plan at its own w): the table says so rather than let

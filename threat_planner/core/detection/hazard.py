@@ -30,8 +30,11 @@ __all__ = ['DetectionReport', 'Layout', 'hazard_and_gradient', 'layout', 'path_h
 ORDER = 8
 #: Longest piece, as a fraction of the pair's closest approach (or detection range).
 PIECE = 0.5
-#: Most pieces of one (segment, threat) pair.
+#: Most pieces of one (segment, threat) pair; a pair that needs more is cut in
+#: SPLIT_PARTS, up to SPLITS times.
 MAX_PIECES = 256
+SPLIT_PARTS = 8
+SPLITS = 8
 #: A pair whose largest SNR along its segment is below this adds only the floor (its
 #: excess is below 1e-12 P_fa |ln P_fa| per scan).
 NEGLIGIBLE_SNR = 1e-12
@@ -135,6 +138,23 @@ def _pairs(points: NDArray, positions: NDArray, intensities: NDArray, model: Det
         seg, thr = seg.astype(np.int64), thr.astype(np.int64)
         f0, f1 = f0.astype(float), f1.astype(float)
     d = b - a
+    for _ in range(SPLITS):
+        pa, pb = a[seg] + f0[:, None] * d[seg], a[seg] + f1[:, None] * d[seg]
+        near = _closest(pa, pb, positions[thr])
+        inner = (np.asarray(intensities, float)[thr] * model.smallest_rcs / RANGE_SNR) ** 0.25
+        wide = (np.linalg.norm(pb - pa, axis=1)
+                > MAX_PIECES * PIECE * np.maximum(near, 0.25 * inner))
+        if not wide.any():
+            break
+        # A pair that would need more than MAX_PIECES even pieces (a long segment beside
+        # a weak radar) is cut in SPLIT_PARTS, each with its own closest approach.
+        k = SPLIT_PARTS
+        cut = np.repeat(np.flatnonzero(wide), k)
+        step = (f1[cut] - f0[cut]) / k
+        lo = f0[cut] + step * np.tile(np.arange(k), int(wide.sum()))
+        keep = ~wide
+        seg, thr = np.concatenate([seg[keep], seg[cut]]), np.concatenate([thr[keep], thr[cut]])
+        f0, f1 = np.concatenate([f0[keep], lo]), np.concatenate([f1[keep], lo + step])
     pa, pb = a[seg] + f0[:, None] * d[seg], a[seg] + f1[:, None] * d[seg]
     near = _closest(pa, pb, positions[thr])
     # sigma <= largest_rcs from every aspect: SNR <= F sigma_max / d^4.
@@ -252,7 +272,7 @@ def hazard_and_gradient(points: NDArray, positions: NDArray, intensities: NDArra
 
 def path_hazard(points: NDArray, positions: NDArray, intensities: NDArray,
                 model: DetectionModel, pieces: tuple | None = None) -> DetectionReport:
-    """The exact cumulative detection of a polyline.
+    """Return the exact cumulative detection of a polyline.
 
     Pieces no longer than SETTLED of their scale, out of their radar's range, are summed
     once; the others' layout is

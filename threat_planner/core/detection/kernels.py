@@ -8,7 +8,9 @@ Poisson mixture of its chi-square tails, P_d = sum_j Pois(j; SNR) P(Pois(x/2) <=
 x = -2 ln P_fa, and dP_d/dSNR = sum_j Pois(j; SNR) Pois(j + 1; x/2), summed where the
 first factor matters; beyond sqrt(2 SNR) > sqrt(x) + ``_SURE_GAP`` P_d is 1 to double
 precision. Compiled on the first detection plan of an install and cached with the rest
-(:mod:`threat_planner.core._numba_cache`, which lists this module).
+(:mod:`threat_planner.core._numba_cache`'s folder; not among its SOURCES: the AOT
+path imports every module there, and this one imports numba. It calls no other kernel,
+so numba's own check of this file's stamp keeps its cache right).
 """
 
 from __future__ import annotations
@@ -182,7 +184,8 @@ def compiled_hazard(points: NDArray, positions: NDArray, intensities: NDArray, m
     _hazard(points, np.ascontiguousarray(positions, float),
             np.ascontiguousarray(intensities, float), _ints(lay.seg), _ints(lay.thr),
             np.ascontiguousarray(lay.f1 - lay.f0, float), _ints(lay.node_piece),
-            np.ascontiguousarray(lay.node_t, float), np.ascontiguousarray(lay.node_w, float), float(model.rcs_constant), float(aa),
+            np.ascontiguousarray(lay.node_t, float), np.ascontiguousarray(lay.node_w, float),
+            float(model.rcs_constant), float(aa),
             float(bb), float(cc), float(model.p_fa), int(model.swerling),
             float(model.metres_per_scan), bool(want_grad), per, grad)
     return per, (grad if want_grad else None)

@@ -25,7 +25,6 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import special
 
 from threat_planner.core.inputs.rcs import parse_rcs
 from threat_planner.errors import InputError
@@ -79,7 +78,7 @@ class DetectionModel:
 
     @classmethod
     def of(cls, config: object) -> 'DetectionModel':
-        """The model of a PlannerConfig (``speed_mps``, ``scan_period_s``, ``p_fa``, ...)."""
+        """Return the model of a PlannerConfig (``speed_mps``, ``scan_period_s``, ...)."""
         kind, values = parse_rcs(getattr(config, 'rcs'))
         return cls(speed_mps=float(config.speed_mps),
                    scan_period_s=float(config.scan_period_s), p_fa=float(config.p_fa),
@@ -123,7 +122,7 @@ class DetectionModel:
         return math.pi * (a * b * c) ** 2 / max(a, b, c) ** 4
 
     def rcs(self, nose: NDArray, line_of_sight: NDArray) -> NDArray:
-        """sigma [m^2] seen along unit lines of sight (N, 3) from segments along `nose`."""
+        """Return sigma [m^2] seen along unit lines of sight (N, 3) from segments along `nose`."""
         g = np.asarray(line_of_sight, float)
         q = self._form(np.asarray(nose, float), g)
         return self.rcs_constant * np.einsum('ij,ij->i', g, g) ** 2 / q ** 2
@@ -142,7 +141,8 @@ def snr_parts(e: NDArray, g: NDArray, axes2: tuple[float, float, float],
 
     Returns ``(Q, dQ/dg, dQ/de)``, the gradients None unless `want_grad`. The right wing is
     the horizontal unit vector across e (r = e x up / |e x up|), so r r^T needs only e's
-    horizontal part; a vertical segment has its wings along x.
+    horizontal part; a vertical segment has its wings along y (its frame has no limit there:
+    the flight limits keep paths off it).
     """
     aa, bb, cc = axes2
     gg = np.einsum('ij,ij->i', g, g)
@@ -214,6 +214,7 @@ def p_detect_scan(snr_: NDArray, p_fa: float, swerling: int,
     p = np.where(finite, _ncx2_sf(x, sf), 1.0)
     if not want_grad:
         return p, None
+    from scipy import special   # only here: importing the core loads no scipy
     z = np.sqrt(2.0 * sf * x)
     tiny = sf < 1e-12
     # e^(-SNR - x/2) I_1(z) sqrt(x / (2 SNR)), I_1 scaled (ive) against overflow; below

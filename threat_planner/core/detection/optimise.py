@@ -153,9 +153,9 @@ def minimise_detection(x0: NDArray, prob: DetectionProblem, rounds: int = MAX_RO
     Returns the best feasible iterate of the rounds (least objective) or, where none was
     feasible, the last one.
     """
-    x = np.clip(np.asarray(x0, float).copy(), np.vstack([x0[0], *[prob.lo] * (len(x0) - 2),
-                                                          x0[-1]]),
-                np.vstack([x0[0], *[prob.hi] * (len(x0) - 2), x0[-1]]))
+    inner = len(x0) - 2
+    x = np.clip(np.asarray(x0, float).copy(), np.vstack([x0[0], *[prob.lo] * inner, x0[-1]]),
+                np.vstack([x0[0], *[prob.hi] * inner, x0[-1]]))
     n1 = len(x)
     term = LimitTerm(aim(prob.limits), n1) if prob.limits.any_constraint else None
     lam = np.zeros(term.rows) if term is not None else np.zeros(0)

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from threat_planner.core.detection.model import DetectionModel
 from threat_planner.core.detection.optimise import (DetectionProblem, minimise_detection,
-                                                   Outcome, refine_slsqp)
+                                                    Outcome, refine_slsqp)
 from threat_planner.core.methods.best import network_routes, plan_best
 from threat_planner.core.methods.problem import Candidate, Problem
 from threat_planner.core.optimise.limits import FlightLimits
@@ -75,8 +75,8 @@ def plan_detection(p: Problem) -> Candidate:
         p.clock.lap('detection_ms')
         status = (f'unmet: the least P_detect found within the limits is '
                   f'{-math.expm1(-least.hazard):.6g} > max_detection {cfg.max_detection:g}')
-        return _candidate(p, paper, least, status, lead, bounded=dataclasses.replace(prob,
-                                                                               h_max=h_max))
+        return _candidate(p, paper, least, status, lead,
+                          bounded=dataclasses.replace(prob, h_max=h_max))
     bounded = dataclasses.replace(prob, h_max=h_max)
     starts = [least.points]
     for start in (paper.final, resample(np.vstack([p.s, p.t]), cfg.n_points)):
@@ -97,9 +97,10 @@ def plan_detection(p: Problem) -> Candidate:
 
 
 def replan_detection(p: Problem, path: NDArray, previous: object) -> Candidate | None:
-    """Refine a warm replan's path (:mod:`threat_planner.core.methods.warm`) on the detection
-    objective: SLSQP at the plan's segments, the rounds where it stops short; None where
-    the result breaks a limit or the bound (the replan goes cold).
+    """Refine a warm replan's path on the detection objective, or None to plan cold.
+
+    The path is :mod:`threat_planner.core.methods.warm`'s: SLSQP at the plan's segments,
+    the rounds where it stops short; None where the result breaks a limit or the bound.
 
     The warm rule's basin lead is the detection basins' (:func:`_search` sets it), so a
     move that could swap them plans cold.
@@ -137,19 +138,22 @@ def _problem(p: Problem) -> DetectionProblem:
     lo[2] = min(lo[2] + cfg.min_altitude_m, float(box.hi[2]))
     pieces_of = None
     if p.airspace is not None and p.airspace.masking:
+        from functools import partial
         from threat_planner.core.cost.masking import visible_pieces
-        terrain, positions = p.airspace.terrain, p.threats.positions
-
-        def pieces_of(points: NDArray) -> tuple:
-            return visible_pieces(points, positions, terrain)
+        pieces_of = partial(_seen, visible_pieces, p.threats.positions, p.airspace.terrain)
     return DetectionProblem(positions=p.threats.positions, intensities=p.threats.intensities,
                             model=DetectionModel.of(cfg), w=cfg.w,
                             l0=max(float(np.linalg.norm(p.t - p.s)), 1e-9), lo=lo, hi=hi,
                             limits=p.limits, floor_z=float(box.lo[2]), pieces_of=pieces_of)
 
 
+def _seen(visible_pieces, positions: NDArray, terrain, points: NDArray) -> tuple:
+    """Return the pieces of a path's segments each radar sees over the terrain."""
+    return visible_pieces(points, positions, terrain)
+
+
 def _seeds(p: Problem, paper: Candidate) -> list[NDArray]:
-    """The straight line and the distinct network routes, as polylines."""
+    """Return the straight line and the distinct network routes, as polylines."""
     seeds = [np.vstack([p.s, p.t])]
     if p.airspace is None and p.edge_j is not None:
         nodes = p.network.nodes
