@@ -136,8 +136,9 @@ def test_plan_record_replays_and_matches_the_node(tmp_path):
     assert offline.parameters.keys() == node.parameters.keys()
     assert offline.parameters['method'] == node.parameters['method'] == 'best'
     assert sorted(i.kind for i in offline.inputs) == sorted(i.kind for i in node.inputs)
-    # The committed bag predates the trajectory keys (issue 44); the rest match in order.
-    timed = ['t0_ns', 'speed_mps', 'eta_s']
+    # The committed bag predates the trajectory keys (issue 44) and the detection keys
+    # (issue 43); the rest match in order.
+    timed = ['t0_ns', 'speed_mps', 'eta_s', 'cost_model', 'P_detect', 'H', 'detection_top']
     assert set(timed) <= set(offline.plans[0].values)
     assert ([k for k in offline.plans[0].values if k not in timed]
             == [k for k in node.plans[0].values if k not in timed])

@@ -188,7 +188,8 @@ def install() -> int:
     if m is None or _STATE['installed']:
         return _STATE['installed']
     from threat_planner.core import _numba_cache
-    names = ['threat_planner.core.' + s[:-3].replace('/', '.') for s in _numba_cache.SOURCES]
+    names = ['threat_planner.core.' + s[:-3].replace('/', '.') for s in _numba_cache.SOURCES
+             if s not in _numba_cache.JIT_ONLY]
     for name in names:
         importlib.import_module(name)
     for name in names:

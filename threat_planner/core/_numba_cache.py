@@ -33,7 +33,10 @@ import tempfile
 SOURCES = ('cost/closed_form.py', 'cost/pair_integrals.py', 'cost/kernels.py',
            'cost/near_kernels.py', 'network/graph_kernels.py', 'optimise/lbfgs.py',
            'optimise/limit_kernels.py', 'optimise/lagrangian_kernels.py', 'optimise/limits.py',
-           'optimise/chain_kernels.py')
+           'optimise/chain_kernels.py', 'detection/kernels.py')
+#: Of those, the modules with no AOT export (they import numba itself): the AOT path does
+#: not import them, so a process that plans on the AOT kernels loads no numba.
+JIT_ONLY = ('detection/kernels.py',)
 
 _CORE = Path(__file__).resolve().parent
 _configured = False

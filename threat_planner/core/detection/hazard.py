@@ -16,6 +16,7 @@ function with its exact gradient; the layout is re-made between its rounds.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 import math
 
 import numpy as np
@@ -57,12 +58,16 @@ FAR_ORDER = 2
 FAR = 0.003
 
 
+@lru_cache(maxsize=None)
 def _rule(order: int) -> tuple[NDArray, NDArray]:
-    nodes, weights = np.polynomial.legendre.leggauss(order)
+    """Return Gauss-Legendre nodes and weights on [0, 1].
+
+    numpy.polynomial is loaded on first use: a plan that reports no detection never
+    imports it.
+    """
+    from numpy.polynomial import legendre
+    nodes, weights = legendre.leggauss(order)
     return 0.5 * (nodes + 1.0), 0.5 * weights
-
-
-_RULES = {order: _rule(order) for order in (ORDER, SHORT_ORDER, FAR_ORDER)}
 
 
 @dataclass(frozen=True)
@@ -205,7 +210,7 @@ def _layout(pairs: tuple, refine: int) -> Layout:
     far, short = ratio <= FAR, (ratio > FAR) & (ratio <= SHORT)
     parts = []
     for order, pick in ((FAR_ORDER, far), (SHORT_ORDER, short), (ORDER, ratio > SHORT)):
-        nodes, weights = _RULES[order]
+        nodes, weights = _rule(order)
         parts.append((np.repeat(piece[pick], order),
                       (lo[pick, None] + nodes[None, :] * width[pick, None]).reshape(-1),
                       (weights[None, :] * width[pick, None]).reshape(-1)))

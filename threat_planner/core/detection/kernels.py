@@ -8,9 +8,8 @@ Poisson mixture of its chi-square tails, P_d = sum_j Pois(j; SNR) P(Pois(x/2) <=
 x = -2 ln P_fa, and dP_d/dSNR = sum_j Pois(j; SNR) Pois(j + 1; x/2), summed where the
 first factor matters; beyond sqrt(2 SNR) > sqrt(x) + ``_SURE_GAP`` P_d is 1 to double
 precision. Compiled on the first detection plan of an install and cached with the rest
-(:mod:`threat_planner.core._numba_cache`'s folder; not among its SOURCES: the AOT
-path imports every module there, and this one imports numba. It calls no other kernel,
-so numba's own check of this file's stamp keeps its cache right).
+(:mod:`threat_planner.core._numba_cache`, which lists it among its SOURCES and its
+JIT_ONLY modules: the AOT path does not import it, so the core loads no numba).
 """
 
 from __future__ import annotations
