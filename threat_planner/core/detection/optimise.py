@@ -50,9 +50,6 @@ SLSQP_SETTLED = 1e-3
 BOUND_MARGIN = 1e-6
 
 
-_TRACE = None
-
-
 @dataclass(frozen=True)
 class DetectionProblem:
     """What the detection objective of one plan depends on.
@@ -209,8 +206,6 @@ def minimise_detection(x0: NDArray, prob: DetectionProblem, rounds: int = MAX_RO
             lam_h = max(0.0, lam_h - mu * g)
         value = prob.objective(x, h)
         feasible = prob.feasible(x, h)
-        if _TRACE is not None:
-            _TRACE.append((r, value, violation, feasible, res.nit, res.nfev, mu))
         if feasible and (best is None or value < best[2]):
             best = (x.copy(), h, value)
         if feasible and abs(last_value - value) <= ROUND_TOLERANCE * max(abs(value), 1e-12):
@@ -300,8 +295,6 @@ def refine_slsqp(x0: NDArray, prob: DetectionProblem, max_iter: int = SLSQP_ITER
         h = prob.hazard(x)
         value = prob.objective(x, h)
         feasible = prob.feasible(x, h)
-        if _TRACE is not None:
-            _TRACE.append(('slsqp', runs, value, feasible, res.nit, res.status, moved))
         if feasible and (best is None or value < best[2]):
             best = (x.copy(), h, value)
         if moved < SLSQP_SETTLED * prob.l0:

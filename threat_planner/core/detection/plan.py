@@ -180,8 +180,7 @@ def _search(p: Problem, prob: DetectionProblem, paper: NDArray, seeds: list[NDAr
     n = p.config.n_points
     starts, basins, values = [], [], []
     for value, points in screened:
-        if any(np.max(np.linalg.norm(points - other, axis=1)) < SAME_BASIN * prob.l0
-               for other in basins):
+        if _in_basin(points, basins, prob.l0):
             continue
         basins.append(points)
         values.append(value)
@@ -201,9 +200,8 @@ def _search(p: Problem, prob: DetectionProblem, paper: NDArray, seeds: list[NDAr
         if out is None:
             continue
         out = _clear(p, paper, out, prob)
-        if out.feasible and not any(
-                np.max(np.linalg.norm(out.points - other, axis=1)) < SAME_BASIN * prob.l0
-                for _, other in ends):
+        if out.feasible and not _in_basin(out.points, [other for _, other in ends],
+                                          prob.l0):
             ends.append((out.objective, out.points))
         if out.feasible and (not best.feasible or out.objective < best.objective):
             best = out
@@ -215,6 +213,12 @@ def _search(p: Problem, prob: DetectionProblem, paper: NDArray, seeds: list[NDAr
         lead = values[len(starts)] / values[0] - 1.0 if len(values) > len(starts) and \
             values[0] > 0 else math.inf
     return best, lead
+
+
+def _in_basin(points: NDArray, others: list[NDArray], l0: float) -> bool:
+    """Whether a path lies within SAME_BASIN of L_0 of one of others at every vertex."""
+    return any(np.max(np.linalg.norm(points - other, axis=1)) < SAME_BASIN * l0
+               for other in others)
 
 
 def _refine(points: NDArray, prob: DetectionProblem, n: int,
@@ -230,9 +234,7 @@ def _refine(points: NDArray, prob: DetectionProblem, n: int,
     if MIDDLE_SEGMENTS < n and len(points) - 1 < MIDDLE_SEGMENTS:
         out = refine_slsqp(resample(points, MIDDLE_SEGMENTS), prob, layouts=2)
         if middles is not None:
-            if out.feasible and any(
-                    np.max(np.linalg.norm(out.points - other, axis=1)) < SAME_BASIN * prob.l0
-                    for other in middles):
+            if out.feasible and _in_basin(out.points, middles, prob.l0):
                 return None
             middles.append(out.points)
         points = out.points
