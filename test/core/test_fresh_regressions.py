@@ -23,8 +23,6 @@ STILL_ABOVE: dict[str, str] = {
     # threat counted exactly the first ends at 508.90 too: the cut-off of before found a
     # lower basin by its error.
     'fresh_s1796561117_uniform_n1000_f0_w0p8_on': '509.356 against the release 489.801',
-    'fresh_s1796561117_uniform_n10000_f1_w0p5_off': '1084.187 against 1077.830',
-    'fresh_s1796561117_strongweak_n10000_f0_w0p2_off': '1258.958 against 1255.568',
     'fresh_s1796561117_strongweak_n10000_f1_w0p2_on': '1244.040 against 1228.722',
 }
 
