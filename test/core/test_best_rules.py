@@ -349,7 +349,8 @@ def test_without_limits_the_best_surface_route_is_refined_when_a_network_route_w
     box = Box.from_corners([0.0] * 3, [side] * 3)
     cfg = PlannerConfig(w=0.5, max_climb_deg=90.0, max_dive_deg=90.0, min_turn_radius_m=0.0)
     both = plan(threats, s, t, box, cfg)
-    monkeypatch.setattr(best, '_surface_alternative', lambda p, b, order, route, m: (b, m))
+    monkeypatch.setattr(best, '_lattice_alternatives', lambda p, b, order, route, m: (b, m))
+    monkeypatch.setattr(best, 'volume_routes', lambda *args, **kw: [])
     plain = plan(threats, s, t, box, cfg)
     assert both.seed.startswith('surface route') and not plain.seed.startswith('surface')
     assert both.cost.J < 0.97 * plain.cost.J

@@ -12,7 +12,8 @@ from threat_planner.core.cost.closed_form import path_cost
 from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.network.partition import build_network, paper_network
 from threat_planner.core.network.search import nearest_nodes, spread_nodes
-from threat_planner.core.network.seeds import surface_lattice, surface_routes
+from threat_planner.core.network.seeds import (_unit_volume, surface_lattice, surface_routes,
+                                               volume_routes)
 from threat_planner.core.planner import plan, PlannerConfig
 from threat_planner.core.world.threats import Box
 from threat_planner.errors import PlanningError
@@ -136,6 +137,30 @@ def test_surface_routes_run_from_start_to_goal_over_the_box_surface(name):
         on_face = np.isclose(inner, sc.box.lo) | np.isclose(inner, sc.box.hi)
         assert np.all(on_face.any(axis=1))
     assert not any(np.array_equal(routes[0], r) for r in routes[1:])
+
+
+def test_volume_lattice_edges_are_every_neighbour_pair_once():
+    n = 3
+    cells, edges = _unit_volume(n)
+    expected = {(i, j) for i in range(len(cells)) for j in range(i + 1, len(cells))
+                if np.abs(cells[i] - cells[j]).max() == 1}
+    got = [tuple(sorted(e)) for e in edges.tolist()]
+    assert len(got) == len(set(got)) and set(got) == expected
+
+
+def test_volume_routes_run_from_start_to_goal_through_the_box_and_differ():
+    # The fresh field whose optimum crosses a sparse corner of the cloud (seeds.py).
+    sc = load_scenario(DATA / 'inbox_regressions'
+                       / 'inbox_s1796561117_uniform_n1000_f0_w0p2_off.yaml')
+    routes = volume_routes(sc.threats, sc.start, sc.goal, sc.box, 0.2)
+    assert len(routes) == 2 and not np.array_equal(routes[0], routes[1])
+    for line in routes:
+        assert np.allclose(line[0], sc.start) and np.allclose(line[-1], sc.goal)
+        assert _inside(line, sc.box)
+    # Off the surface: the lattice's inner points carry the route.
+    inner = np.vstack([line[1:-1] for line in routes])
+    on_face = np.isclose(inner, sc.box.lo) | np.isclose(inner, sc.box.hi)
+    assert not np.all(on_face.any(axis=1))
 
 
 def test_surface_seed_wins_on_the_dense_field_and_beats_the_network_routes():

@@ -265,7 +265,8 @@ SETTINGS: tuple[Setting, ...] = (
     Setting('routes', int, 6, "Distinct network routes screened by 'best' (plus the line)",
             lo=1, hi=32, node=False),
     Setting('surface_seeds', bool, True,
-            "Also screen least-J routes over the box's surface lattice ('best' only)",
+            "Also screen least-J routes over box lattices: its surface, and without flight "
+            "limits its volume ('best' only)",
             node=False),
     Setting('box_divisions', int, 2, 'Intervals per box edge of the auxiliary surface lattice',
             lo=1, hi=16, node=False),

@@ -24,7 +24,7 @@ from threat_planner.core.methods.refining import (converge, counts_far_threats, 
                                                   optimiser_cutoff, refine, usable,
                                                   WARM_PENALTY)
 from threat_planner.core.network.search import alternative_routes, nearest_nodes, segment_costs
-from threat_planner.core.network.seeds import SURFACE_ROUTES, surface_routes
+from threat_planner.core.network.seeds import SURFACE_ROUTES, surface_routes, volume_routes
 from threat_planner.core.optimise.optimisation import is_crowded, minimise_cost, PENALTY_START
 from threat_planner.core.optimise.smoothing import check_angles, resample
 
@@ -58,11 +58,13 @@ RESCUE_GROWTH = 10.0
 #: 25,211 that had won; no change on the 63 fresh fields or the 21 bundled cases).
 RESCUE_MARGIN = 0.1
 #: Surface routes screened without flight limits, each refined unless its basin was
-#: (:func:`_surface_alternative`): the lattice ranks them by their zigzags, not by their
+#: (:func:`_lattice_alternatives`): the lattice ranks them by their zigzags, not by their
 #: basins (fresh uniform n300 f1 w 0.5 of seed 1796561117: the third, at lattice J 440.9
 #: against the first's 424.3, refined to 403.5 against 413.3, the in-box yardstick's
 #: basin at 403.3).
 FREE_SURFACE_ROUTES = 4
+#: Seed names of the lattice routes (:func:`_lattice_alternatives`).
+LATTICE_SEEDS = ('surface route', 'volume route')
 #: Bisection steps of the last-resort repair towards the straight line.
 REPAIR_BISECTIONS = 20
 
@@ -121,10 +123,15 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
     # are: 8 coarse segments would cut the box's corners back into the threats.
     if cfg.surface_seeds and bounds is not None:
         dense = SURFACE_DENSE_PAIRS if counts_far_threats(p) else None
-        count = SURFACE_ROUTES if p.limits.any_constraint else FREE_SURFACE_ROUTES
+        free = not p.limits.any_constraint
+        count = FREE_SURFACE_ROUTES if free else SURFACE_ROUTES
         screened += [(p.cost(line).J, f'surface route {i}', [], line) for i, line in
                      enumerate(surface_routes(threats, p.s, p.t, p.box, w, count=count,
                                               dense_pairs=dense))]
+        # Without limits the whole box's lattice too (refined by _lattice_alternatives).
+        screened += [(p.cost(line).J, f'volume route {i}', [], line) for i, line in
+                     enumerate(volume_routes(threats, p.s, p.t, p.box, w, dense_pairs=dense)
+                               if free else [])]
     # --- end of the global-search hook
     screened.sort(key=lambda item: item[0])
     # Lead of the best basin over the next distinct one (routes that screened into the
@@ -191,7 +198,7 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
         # lowered two of n20 seed 1 w 0.8's moved plans by a further 2e-5 and 4e-5.
         best = converge(p, best)
     if not bound and not p.limits.any_constraint:
-        best, margin = _surface_alternative(p, best, order, routes[0], margin)
+        best, margin = _lattice_alternatives(p, best, order, routes[0], margin)
     # The warm-start rule's lead: the screening's where the limits did not bind; where
     # they did, the slope-held screening's, capped by the lead over the next distinct
     # basin refined under the limits (see basins.refined_margin).
@@ -345,22 +352,23 @@ def _polish(p: Problem, best: Candidate) -> Candidate:
     return best
 
 
-def _surface_alternative(p: Problem, best: Candidate, order: list, route: list[int],
-                         margin: float) -> tuple[Candidate, float]:
-    """Without flight limits, refine the surface routes whose basins were not refined.
+def _lattice_alternatives(p: Problem, best: Candidate, order: list, route: list[int],
+                          margin: float) -> tuple[Candidate, float]:
+    """Without flight limits, refine the lattice routes whose basins were not refined.
 
-    Surface routes enter the screening as lattice polylines whose zigzags inflate their
-    J, while the network routes' J is a coarse minimum, and without limits no slope-held
-    screening minimises them before the ranking. On 45 random fields (12-120 threats,
-    limits off) the best surface route, ranked second, refined 3-4 % below the winning
-    route on 2 (n120 seed 2 w 0.5: 355.07 against 370.72) and, ranked third, 0.8 % on
-    a third; among the surface routes the lattice misranks too (FREE_SURFACE_ROUTES).
+    Surface and volume routes (:mod:`..network.seeds`) enter the screening as lattice
+    polylines whose zigzags inflate their J, while the network routes' J is a coarse
+    minimum, and without limits no slope-held screening minimises them before the
+    ranking. On 45 random fields (12-120 threats, limits off) the best surface route,
+    ranked second, refined 3-4 % below the winning route on 2 (n120 seed 2 w 0.5: 355.07
+    against 370.72) and, ranked third, 0.8 % on a third; among the lattice routes the
+    lattice misranks too (FREE_SURFACE_ROUTES).
     Returns the best candidate and the warm-start lead (``margin``, the screening's,
     capped by the lead over every other basin refined here).
     """
     refined = [best]
     for name, seq, coarse, broken in order:
-        if not name.startswith('surface route') or name == best.seed:
+        if not name.startswith(LATTICE_SEEDS) or name == best.seed:
             continue
         if any(same_basin(p, coarse, c.final) for c in refined):
             continue
