@@ -7,7 +7,7 @@ Usage::
 Fresh fields (``bench.toolkit.fresh_fields``, uniform and clustered; the seed from the
 clock, printed; ``--seed`` replays), the default limits on, w 0.5 and 0.999. Per case:
 the paper-cost plan and the detection plan; the bench's own P_detect
-(``bench.toolkit.detection_slsqp``) beside the product's; the yardstick (multi-start
+(``bench.toolkit.detection_yardstick``) beside the product's; the yardstick (multi-start
 SLSQP on w H + (1 - w) L / L_0 at 40 segments from the line, both plans and a perturbed
 line); plan times at 20 threats (warm); and ``max_detection`` = the paper plan's P_detect.
 Writes bench/results/detection.{md,json} (``--out``).
@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from bench.toolkit import detection_slsqp as dy
+from bench.toolkit import detection_yardstick as dy
 from bench.toolkit.fresh_fields import make_field
 from bench.toolkit.repo import RESULTS, ROOT
 
