@@ -24,6 +24,10 @@ STILL_ABOVE: dict[str, str] = {
     # lower basin by its error.
     'fresh_s1796561117_uniform_n1000_f0_w0p8_on': '509.356 against the release 489.801',
     'fresh_s1796561117_strongweak_n10000_f1_w0p2_on': '1244.040 against 1228.722',
+    # Gate run of 0d95003, seed 1796638025 (bench/results/fresh_lattice.md); the first
+    # was 658.593 at a855110, before the lattice routes.
+    'fresh_s1796638025_uniform_n1000_f0_w0p2_off': '657.016 against 653.724',
+    'fresh_s1796638025_uniform_n3000_f1_w0p8_on': '663.999 against 661.759',
 }
 
 
