@@ -27,7 +27,7 @@ def test_within_the_in_box_yardstick(path):
     w = float(re.search(r'_w(\d)p(\d+)_off$', path.stem).expand(r'\1.\2'))
     yardstick = float(re.search(r'in-box yardstick J ([0-9.]+)', text)[1])
     r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=w, **LIMITS_OFF))
-    assert r.seed.startswith(('surface route', 'volume route'))
+    assert r.feasible and r.seed.startswith(('surface route', 'volume route'))
     assert r.cost.J <= 1.001 * yardstick, f'J {r.cost.J:.4f} against {yardstick:.4f}'
 
 
