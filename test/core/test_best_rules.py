@@ -366,6 +366,7 @@ def test_without_limits_every_surface_basin_is_refined(monkeypatch):
     from threat_planner.core.planner import plan, PlannerConfig
     sc = load_scenario(DATA / 'inbox_regressions' /
                        'inbox_s1796561117_uniform_n300_f1_w0p5_off.yaml')
+    monkeypatch.setattr(best, 'volume_routes', lambda *args, **kw: [])   # surface alone
     names = []
     real = best._refine
     monkeypatch.setattr(best, '_refine', lambda p, start, seq, name, *rest, **kw:

@@ -32,4 +32,4 @@ def test_within_the_in_box_yardstick(path):
 
 
 def test_the_cases_are_there():
-    assert len(CASES) == 5
+    assert len(CASES) == 6
