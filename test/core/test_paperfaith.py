@@ -12,7 +12,7 @@ from threat_planner.core.cost.closed_form import path_cost
 from threat_planner.core.inputs.scenario import load_scenario
 from threat_planner.core.network.partition import build_network, paper_network
 from threat_planner.core.network.search import nearest_nodes, spread_nodes
-from threat_planner.core.network.seeds import (_unit_volume, surface_lattice, surface_routes,
+from threat_planner.core.network.seeds import (_unit_lattice, surface_lattice, surface_routes,
                                                VOLUME_ROUTES, volume_routes)
 from threat_planner.core.planner import plan, PlannerConfig
 from threat_planner.core.world.threats import Box
@@ -141,7 +141,7 @@ def test_surface_routes_run_from_start_to_goal_over_the_box_surface(name):
 
 def test_volume_lattice_edges_are_every_neighbour_pair_once():
     n = 3
-    cells, edges = _unit_volume(n)
+    cells, edges = _unit_lattice(n, surface=False)
     expected = {(i, j) for i in range(len(cells)) for j in range(i + 1, len(cells))
                 if np.abs(cells[i] - cells[j]).max() == 1}
     got = [tuple(sorted(e)) for e in edges.tolist()]

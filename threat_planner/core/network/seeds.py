@@ -68,49 +68,33 @@ def surface_lattice(box: Box, divisions: int) -> tuple[NDArray, NDArray]:
 
 
 @lru_cache(maxsize=4)
-def _unit_lattice(divisions: int) -> tuple[NDArray, NDArray]:
-    """Return the lattice in integer cells 0..divisions per axis (read-only: shared)."""
+def _unit_lattice(divisions: int, surface: bool = True) -> tuple[NDArray, NDArray]:
+    """Return the lattice in integer cells 0..divisions per axis (read-only: shared).
+
+    ``surface``: only the cells on the box's surface and the edges that lie on a face;
+    else every cell and its 13 forward neighbours (26-connected).
+    """
     n = divisions
     ticks = np.arange(n + 1)
     grid = np.stack(np.meshgrid(ticks, ticks, ticks, indexing='ij'), axis=-1).reshape(-1, 3)
-    on_face = (grid == 0) | (grid == n)
-    surface = on_face.any(axis=1)
+    kept = ((grid == 0) | (grid == n)).any(axis=1) if surface else np.ones(len(grid), bool)
     ids = np.full(len(grid), -1, dtype=np.int64)
-    ids[surface] = np.arange(int(surface.sum()))
-    cells = grid[surface]
+    ids[kept] = np.arange(int(kept.sum()))
+    cells = grid[kept]
     offsets = np.array([o for o in np.ndindex(3, 3, 3)]) - 1
     offsets = offsets[[tuple(o) > (0, 0, 0) for o in offsets]]
     pairs = []
     for o in offsets:
         b = cells + o
         ok = np.all((b >= 0) & (b <= n), axis=1)
-        # The edge lies on a face when an axis it does not move along is at 0 or n.
-        ok &= np.any((o == 0) & ((cells == 0) | (cells == n)), axis=1)
+        if surface:
+            # The edge lies on a face when an axis it does not move along is at 0 or n.
+            ok &= np.any((o == 0) & ((cells == 0) | (cells == n)), axis=1)
         flat = (b[ok] * [(n + 1) ** 2, n + 1, 1]).sum(axis=1)
         dst = ids[flat]
         src = np.flatnonzero(ok)
         keep = dst >= 0
         pairs.append(np.stack([src[keep], dst[keep]], axis=1))
-    edges = np.concatenate(pairs)
-    cells.setflags(write=False)
-    edges.setflags(write=False)
-    return cells, edges
-
-
-@lru_cache(maxsize=2)
-def _unit_volume(divisions: int) -> tuple[NDArray, NDArray]:
-    """Every cell 0..divisions per axis and its 13 forward neighbours (read-only: shared)."""
-    n = divisions
-    ticks = np.arange(n + 1)
-    cells = np.stack(np.meshgrid(ticks, ticks, ticks, indexing='ij'), axis=-1).reshape(-1, 3)
-    offsets = np.array([o for o in np.ndindex(3, 3, 3)]) - 1
-    offsets = offsets[[tuple(o) > (0, 0, 0) for o in offsets]]
-    pairs = []
-    for o in offsets:
-        b = cells + o
-        ok = np.all((b >= 0) & (b <= n), axis=1)
-        pairs.append(np.stack([np.flatnonzero(ok), (b[ok] * [(n + 1) ** 2, n + 1, 1]).sum(1)],
-                              axis=1))
     edges = np.concatenate(pairs)
     cells.setflags(write=False)
     edges.setflags(write=False)
@@ -124,7 +108,7 @@ def volume_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: flo
 
     Args and returns as :func:`surface_routes`.
     """
-    cells, edges = _unit_volume(divisions)
+    cells, edges = _unit_lattice(divisions, surface=False)
     return _routes(box.lo + cells / divisions * (box.hi - box.lo), edges, threats, s, t, box,
                    w, count, dense_pairs)
 
