@@ -143,13 +143,14 @@ def _pairs(points: NDArray, positions: NDArray, intensities: NDArray, model: Det
         seg, thr = seg.astype(np.int64), thr.astype(np.int64)
         f0, f1 = f0.astype(float), f1.astype(float)
     d = b - a
-    for _ in range(SPLITS):
+    for cuts in range(SPLITS + 1):
         pa, pb = a[seg] + f0[:, None] * d[seg], a[seg] + f1[:, None] * d[seg]
         near = _closest(pa, pb, positions[thr])
+        # Inside the range at the smallest aspect's RCS, P_d is flat: no finer than that.
         inner = (np.asarray(intensities, float)[thr] * model.smallest_rcs / RANGE_SNR) ** 0.25
-        wide = (np.linalg.norm(pb - pa, axis=1)
-                > MAX_PIECES * PIECE * np.maximum(near, 0.25 * inner))
-        if not wide.any():
+        length = np.linalg.norm(pb - pa, axis=1)
+        wide = length > MAX_PIECES * PIECE * np.maximum(near, 0.25 * inner)
+        if cuts == SPLITS or not wide.any():
             break
         # A pair that would need more than MAX_PIECES even pieces (a long segment beside
         # a weak radar) is cut in SPLIT_PARTS, each with its own closest approach.
@@ -160,16 +161,11 @@ def _pairs(points: NDArray, positions: NDArray, intensities: NDArray, model: Det
         keep = ~wide
         seg, thr = np.concatenate([seg[keep], seg[cut]]), np.concatenate([thr[keep], thr[cut]])
         f0, f1 = np.concatenate([f0[keep], lo]), np.concatenate([f1[keep], lo + step])
-    pa, pb = a[seg] + f0[:, None] * d[seg], a[seg] + f1[:, None] * d[seg]
-    near = _closest(pa, pb, positions[thr])
     # sigma <= largest_rcs from every aspect: SNR <= F sigma_max / d^4.
     reach = (np.asarray(intensities, float)[thr] * model.largest_rcs) ** 0.25
     with np.errstate(divide='ignore', over='ignore'):
         top = np.where(near > 0, (reach / np.maximum(near, 1e-300)) ** 4, np.inf)
-    length = np.linalg.norm(pb - pa, axis=1)
     keep = (top >= NEGLIGIBLE_SNR) & (length > 0)
-    # Inside the range at the smallest aspect's RCS, P_d is flat: no finer than that.
-    inner = (np.asarray(intensities, float)[thr] * model.smallest_rcs / RANGE_SNR) ** 0.25
     scale = np.maximum(near, 0.25 * inner)
     return seg, thr, f0, f1, length, scale, keep, top
 
