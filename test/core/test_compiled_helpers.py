@@ -44,6 +44,27 @@ def test_graph_distances_match_scipy_dijkstra(seed):
         assert np.all(pred[~np.isfinite(dist)] == -1)
 
 
+@pytest.mark.parametrize('seed', range(20))
+def test_a_search_stopped_at_its_target_has_the_full_search_route(seed):
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(2, 300))
+    edges = _random_graph(rng, n, int(rng.integers(1, min(4 * n, n * (n - 1) // 2) + 1)))
+    # Ties too: equal weights make equal-length routes, which must break the same way.
+    weights = (rng.choice([0.5, 1.0, 2.0], len(edges)) if seed % 2
+               else rng.uniform(0, 1, len(edges)))
+    graph = Graph(n, edges)
+    source, target = (int(v) for v in rng.integers(0, n, 2))
+    full_dist, full_pred = graph.shortest(weights, source)
+    dist, pred = graph.shortest(weights, source, target)
+    assert dist[target] == full_dist[target]
+    u = target
+    while np.isfinite(full_dist[target]) and u != source:
+        assert pred[u] == full_pred[u]
+        u = int(pred[u])
+    # Stopped early, the other entries bound the least distances from above.
+    assert np.all(dist >= full_dist)
+
+
 def test_graph_weights_change_in_place_between_searches():
     edges = np.array([[0, 1], [1, 2], [0, 2]])
     graph = Graph(3, edges)

@@ -7,6 +7,7 @@ import pytest
 
 from threat_planner import Box, plan, PlannerConfig, ThreatField
 from threat_planner.core.inputs.scenario import load_scenario
+from threat_planner.core.cost.far_kernels import far_pairs
 from threat_planner.core.world.far_field import FarField
 
 REGRESSIONS = Path(__file__).resolve().parents[1] / 'data' / 'fresh_regressions'
@@ -48,7 +49,7 @@ def test_every_threat_counted_once_per_segment(n, seed, ground):
     threats, box, radius = _field(n, seed, ground)
     far = FarField(threats.positions, threats.intensities, radius)
     p = _path(box)
-    seg, idx = far.pairs(p[:-1], p[1:])
+    seg, idx = far_pairs(far, p[:-1], p[1:])
     assert np.all(np.diff(seg) >= 0)
     # The F of a segment's pairs is all the F there is: nothing dropped, nothing twice.
     np.testing.assert_allclose(np.bincount(seg, far.intensities[idx], len(p) - 1),
@@ -59,6 +60,63 @@ def test_every_threat_counted_once_per_segment(n, seed, ground):
     assert set(zip(near_seg.tolist(), near_thr.tolist())) <= exact
 
 
+def _brute_pairs(far: FarField, a: np.ndarray, b: np.ndarray) -> list[list[int]]:
+    """Each segment's indices by the definition, one cell or threat at a time.
+
+    A cell counts where it is far (at least the cut-off and OPENING x its extent from the
+    segment) and no ancestor is; a threat where no cell holding it is far. Order: the far
+    cells from the top level down, ascending within a level; then the threats of the
+    leaves, leaf by leaf in ascending order.
+    """
+    cells, n = len(far.cell_extent), far.n_threats
+    parent = np.full(cells, -1)
+    level = np.zeros(cells, int)
+    for g in range(far.n_leaf, cells):
+        kids = far.items[far.first[g]:far.first[g + 1]]
+        parent[kids] = g
+        level[g] = level[kids[0]] + 1 if len(kids) else 0
+    leaf_of = np.empty(n, int)
+    for g in range(far.n_leaf):
+        leaf_of[far.items[far.first[g]:far.first[g + 1]]] = g
+    out = []
+    for s in range(len(a)):
+        mid, half = 0.5 * (a[s] + b[s]), 0.5 * np.linalg.norm(b[s] - a[s])
+        dist = np.linalg.norm(mid - np.clip(mid, far.cell_lo, far.cell_hi), axis=1) - half
+        far_cell = (dist >= far.radius) & (dist >= far.opening * far.cell_extent)
+
+        def covered(g):
+            while g >= 0:
+                if far_cell[g]:
+                    return True
+                g = parent[g]
+            return False
+        kept = [g for g in range(cells) if far_cell[g] and not covered(parent[g])]
+        kept.sort(key=lambda g: (-level[g], g))
+        open_leaves = [g for g in range(far.n_leaf) if not covered(g)]
+        threats = [int(i) for g in open_leaves for i in far.items[far.first[g]:far.first[g + 1]]]
+        out.append([n + g for g in kept] + threats)
+    return out
+
+
+@pytest.mark.parametrize('n, seed, kind', [(5, 0, 'uniform'), (300, 1, 'uniform'),
+                                           (1000, 2, 'flat'), (2000, 3, 'cluster')])
+def test_the_compiled_walk_is_the_definition_in_its_order(n, seed, kind):
+    rng = np.random.default_rng(seed)
+    side = 100 * (n / 20) ** (1 / 3)
+    pos = rng.uniform(0.05, 0.95, (n, 3)) * side
+    if kind == 'flat':
+        pos[:, 2] *= 0.05
+    elif kind == 'cluster':
+        pos = (rng.normal(size=(n, 3)) * 0.05 + 0.5) * side
+    radius = float(rng.uniform(0.5, 3.0)) * side / n ** (1 / 3)
+    far = FarField(pos, rng.uniform(1e5, 4e5, n), radius)
+    p = np.cumsum(rng.normal(size=(31, 3)) * side / 30, axis=0) + side / 2
+    seg, idx = far_pairs(far, p[:-1], p[1:])
+    want = _brute_pairs(far, p[:-1], p[1:])
+    assert seg.tolist() == [s for s, row in enumerate(want) for _ in row]
+    assert idx.tolist() == [i for row in want for i in row]
+
+
 @pytest.mark.parametrize('n, seed, ground', [(2000, 1, False), (1000, 2, True)])
 def test_cells_within_two_percent_of_every_threat_where_the_cutoff_lost_more(n, seed, ground):
     threats, box, radius = _field(n, seed, ground)
@@ -67,7 +125,7 @@ def test_cells_within_two_percent_of_every_threat_where_the_cutoff_lost_more(n, 
     a, b = p[:-1], p[1:]
     every = _brute_jr(a, b, threats.positions, threats.intensities,
                       np.repeat(np.arange(len(a)), n), np.tile(np.arange(n), len(a))).sum()
-    seg, idx = far.pairs(a, b)
+    seg, idx = far_pairs(far, a, b)
     cells = _brute_jr(a, b, far.positions, far.intensities, seg, idx).sum()
     near_seg, near_thr, _ = threats.near_pairs(a, b, radius)
     cut = _brute_jr(a, b, threats.positions, threats.intensities, near_seg, near_thr).sum()

@@ -52,6 +52,19 @@ def test_nearest_nodes_are_sorted_by_distance(net):
     assert d[0] == pytest.approx(np.min(np.linalg.norm(net.nodes - p, axis=1)))
 
 
+@pytest.mark.parametrize('k', [1, 5, 40, 10_000])
+def test_nearest_nodes_are_the_k_nearest_by_brute_force(net, k):
+    rng = np.random.default_rng(k)
+    for p in rng.uniform(-20, 120, (10, 3)):
+        idx = net.nearest(p, k)
+        d = np.linalg.norm(net.nodes - p, axis=1)
+        assert len(idx) == min(k, net.n_nodes) and len(set(idx.tolist())) == len(idx)
+        assert np.all(np.diff(d[idx]) >= 0)
+        # None left out is nearer than the farthest kept.
+        rest = np.setdiff1d(np.arange(net.n_nodes), idx)
+        assert len(rest) == 0 or d[rest].min() >= d[idx].max()
+
+
 def test_alternative_routes_are_distinct_and_best_first(net):
     routes = alternative_routes(net, net.edge_lengths, np.zeros(1), np.array([0]),
                                 np.zeros(1), np.array([net.n_nodes - 1]), 4)

@@ -43,6 +43,7 @@ ENTRY = {
     'threat_planner.core.cost.kernels': ('_kernel', '_segment_costs', '_segment_costs_parallel',
                                          '_path_threat_cost'),
     'threat_planner.core.cost.near_kernels': ('_bin', '_near_costs'),
+    'threat_planner.core.cost.far_kernels': ('_far_pairs',),
     'threat_planner.core.network.graph_kernels': ('_dijkstra', 'incentre_kernel'),
     'threat_planner.core.optimise.lbfgs': ('_objective', 'objective_scale', '_minimise'),
     'threat_planner.core.optimise.limit_kernels': ('_measure', '_values', '_penalty'),

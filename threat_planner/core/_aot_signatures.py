@@ -28,8 +28,11 @@ SIGNATURES = {
         ('UniTuple(array(int64, 1d, C) x 2)', (R2, A1, F8, I1)),
     'threat_planner.core.cost.near_kernels._near_costs':
         (NONE, (A2, A2, R2, R1, F8, A1, F8, I1, I1, I1, R1, R1, A1, A1)),
+    'threat_planner.core.cost.far_kernels._far_pairs':
+        ('UniTuple(array(int64, 1d, C) x 2)', (A2, A2, A2, A2, A1, I1, I1, I8, I8, I8, F8,
+         F8)),
     'threat_planner.core.network.graph_kernels._dijkstra':
-        (NONE, (I1, I1, A1, I8, A1, I1)),
+        (NONE, (I1, I1, A1, I8, I8, A1, I1)),
     'threat_planner.core.network.graph_kernels.incentre_kernel':
         (NONE, (A3, A2, A1)),
     'threat_planner.core.optimise.lbfgs._objective':

@@ -31,9 +31,9 @@ import tempfile
 
 #: The modules compiled with ``cache=True`` and the ones whose constants they compile in.
 SOURCES = ('cost/closed_form.py', 'cost/pair_integrals.py', 'cost/kernels.py',
-           'cost/near_kernels.py', 'network/graph_kernels.py', 'optimise/lbfgs.py',
-           'optimise/limit_kernels.py', 'optimise/lagrangian_kernels.py', 'optimise/limits.py',
-           'optimise/chain_kernels.py', 'detection/kernels.py')
+           'cost/near_kernels.py', 'cost/far_kernels.py', 'network/graph_kernels.py',
+           'optimise/lbfgs.py', 'optimise/limit_kernels.py', 'optimise/lagrangian_kernels.py',
+           'optimise/limits.py', 'optimise/chain_kernels.py', 'detection/kernels.py')
 #: Of those, the modules with no AOT export (they import numba itself): the AOT path does
 #: not import them, so a process that plans on the AOT kernels loads no numba.
 JIT_ONLY = ('detection/kernels.py',)

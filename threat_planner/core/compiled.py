@@ -37,7 +37,7 @@ __all__ = ['KERNEL_MODULES', 'KernelReport', 'compile_all', 'ensure_compiled',
 
 #: Every module that defines compiled kernels.
 KERNEL_MODULES = ('threat_planner.core.cost.pair_integrals', 'threat_planner.core.cost.kernels',
-                  'threat_planner.core.cost.near_kernels',
+                  'threat_planner.core.cost.near_kernels', 'threat_planner.core.cost.far_kernels',
                   'threat_planner.core.network.graph_kernels',
                   'threat_planner.core.optimise.lbfgs',
                   'threat_planner.core.optimise.limit_kernels',

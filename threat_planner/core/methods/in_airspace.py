@@ -278,8 +278,7 @@ def plan_in_airspace(p: Problem) -> Candidate:
     legs = {}
     for name, point in (('start', p.s), ('goal', p.t)):
         k = min(net.n_nodes, max(cfg.entry_candidates, 8) * 4)
-        _, cand = net.node_tree.query(point, k=k)
-        cand = np.atleast_1d(cand)
+        cand = net.nearest(point, k)
         ends = np.repeat(point[None], len(cand), 0)
         ok = air.segment_ok(ends, net.nodes[cand])
         if not ok.any():

@@ -27,8 +27,12 @@ MIN_WEIGHT = 1e-12
 
 
 @njit(cache=True)
-def _dijkstra(indptr, indices, data, source, dist, pred):
-    """Least total weight from source to every node into dist; predecessors into pred."""
+def _dijkstra(indptr, indices, data, source, target, dist, pred):
+    """Least total weight from source into dist, predecessors into pred.
+
+    The search stops once it takes target (target < 0: never): dist[target] and target's
+    chain of predecessors are then final, the other entries upper bounds.
+    """
     dist[:] = np.inf
     pred[:] = -1
     done = np.zeros(dist.shape[0], np.bool_)
@@ -39,6 +43,8 @@ def _dijkstra(indptr, indices, data, source, dist, pred):
         if done[u]:
             continue
         done[u] = True
+        if u == target:
+            break
         for k in range(indptr[u], indptr[u + 1]):
             v = indices[k]
             nd = d + data[k]
@@ -73,12 +79,17 @@ class Graph:
         self.slot = np.ascontiguousarray(np.concatenate([np.arange(len(edges))] * 2)[order])
         self.data = np.zeros(len(rows))
 
-    def shortest(self, weights: NDArray, source: int) -> tuple[NDArray, NDArray]:
-        """Least total weights from ``source`` and the predecessors (-1: none), (n,) each."""
+    def shortest(self, weights: NDArray, source: int,
+                 target: int = -1) -> tuple[NDArray, NDArray]:
+        """Least total weights from ``source`` and the predecessors (-1: none), (n,) each.
+
+        With a ``target`` the search stops there: only ``dist[target]`` and the chain of
+        predecessors from it are then final.
+        """
         self.data[:] = np.maximum(np.asarray(weights, float), MIN_WEIGHT)[self.slot]
         dist = np.empty(self.n)
         pred = np.empty(self.n, np.int64)
-        _dijkstra(self.indptr, self.indices, self.data, int(source), dist, pred)
+        _dijkstra(self.indptr, self.indices, self.data, int(source), int(target), dist, pred)
         return dist, pred
 
 

@@ -74,10 +74,16 @@ class Network:
         return np.linalg.norm(self.nodes[self.edges[:, 1]] - self.nodes[self.edges[:, 0]],
                               axis=1)
 
-    @cached_property
-    def node_tree(self) -> cKDTree:
-        """k-d tree over the nodes, for entry and exit candidates."""
-        return cKDTree(self.nodes)
+    def nearest(self, point: NDArray, k: int) -> NDArray:
+        """Return the k nodes nearest to a point [m], nearest first (ties: lower number first).
+
+        By brute force: a plan asks for two points' candidates, and a k-d tree of the
+        66,000 nodes of 10,000 threats took 17 ms to build, the distances 1 ms.
+        """
+        d2 = ((self.nodes - np.asarray(point, float)) ** 2).sum(axis=1)
+        k = max(0, min(int(k), len(d2)))
+        some = np.argpartition(d2, k - 1)[:k] if 0 < k < len(d2) else np.arange(k)
+        return some[np.lexsort((some, d2[some]))].astype(np.int64)
 
     def delaunay_edges(self) -> NDArray:
         """Return the tetrahedra's unique edges, (K, 2) indices into vertices."""

@@ -116,9 +116,7 @@ def nearest_nodes(network: Network, point: NDArray, k: int) -> NDArray:
     Returns:
         Node indices, (min(k, M),).
     """
-    k = max(1, min(k, network.n_nodes))
-    _, idx = network.node_tree.query(point, k=k)
-    return np.atleast_1d(idx).astype(np.int64)
+    return network.nearest(point, max(1, k))
 
 
 def spread_nodes(network: Network, point: NDArray, toward: NDArray, k: int) -> NDArray:
@@ -260,7 +258,7 @@ def _terminal_graph(network: Network, entries: NDArray, exits: NDArray) -> Graph
 
 def _route(graph: Graph, m: int, weights: NDArray) -> tuple[list[int], float]:
     """Least-weight route from the start (node m) to the goal (m + 1), ends dropped."""
-    dist, pred = graph.shortest(weights, m)
+    dist, pred = graph.shortest(weights, m, m + 1)
     if not np.isfinite(dist[m + 1]):
         raise PlanningError('network: the goal is not reachable from the start')
     return _walk_back(pred, m, m + 1)[1:-1], float(dist[m + 1])

@@ -157,7 +157,7 @@ def _routes(points: NDArray, edges: NDArray, threats: ThreatField, s: NDArray, t
     routes: list[NDArray] = []
     seqs: list[list[int]] = []
     for _ in range(2 * count):
-        dist, pred = graph.shortest(weights, m)
+        dist, pred = graph.shortest(weights, m, m + 1)
         if not np.isfinite(dist[m + 1]):
             break
         seq = [m + 1]

@@ -20,6 +20,7 @@ from typing import Callable
 
 import numpy as np
 from numpy.typing import NDArray
+from threat_planner.core.cost.far_kernels import far_pairs
 from threat_planner.core.cost.kernels import _FROZEN_C2, _FROZEN_C3, _frozen, _NO_PAIRS
 from threat_planner.core.optimise.lagrangian_kernels import (counters, has_best, new_state,
                                                              run_rounds)
@@ -316,7 +317,7 @@ class _Level:
         """Pick p's pairs under a cut-off: near threats exactly, far ones in cells."""
         if self.far is None:
             return
-        self.pairs = (*self.far.pairs(p[:-1], p[1:]), self.far_positions)
+        self.pairs = (*far_pairs(self.far, p[:-1], p[1:]), self.far_positions)
 
     def value(self, p: NDArray, even: float, scale: float = 1.0) -> float:
         """Evaluate the objective without the limit term: J + spacing terms, over scale."""

@@ -30,6 +30,8 @@ TOP_CELLS = 8
 class FarField:
     """Cells of a threat field for the pairs of a cut-off radius.
 
+    The pairs themselves are :func:`threat_planner.core.cost.far_kernels.far_pairs`'s.
+
     Parameters
     ----------
     positions : ndarray, shape (n, 3)
@@ -43,7 +45,7 @@ class FarField:
     ----------
     positions, intensities : ndarray
         The threats followed by every cell's pseudo-threat, level by level: the arrays
-        the pairs of :meth:`pairs` index.
+        the pairs index.
     """
 
     def __init__(self, positions: NDArray, intensities: NDArray, radius: float) -> None:
@@ -84,60 +86,34 @@ class FarField:
         self._children = {d: _csr(self._levels[d - 1][3], len(self._levels[d][0]))
                           for d in range(1, len(self._levels))}
         self._members, self._member_start = _csr(cell_of_leaf, len(self._levels[0][0]))
+        self._flatten(n)
 
-    def pairs(self, a: NDArray, b: NDArray) -> tuple[NDArray, NDArray]:
-        """(segment, index) pairs covering every threat once per segment, by segment.
+    def _flatten(self, n: int) -> None:
+        """Every level's cells in one table, for the compiled walk (cost.far_kernels).
 
-        Parameters
-        ----------
-        a, b : ndarray, shape (S, 3)
-            Segment starts and ends [m].
-
-        Returns
-        -------
-        (ndarray, ndarray)
-            Segment indices (ascending) and indices into :attr:`positions`: threats
-            near the segment and cells far from it.
+        Cell g (bottom up, level by level) is pseudo-threat ``n + g`` of :attr:`positions`;
+        ``items[first[g]:first[g + 1]]`` are its children's cell numbers, or a leaf's
+        threats.
         """
-        a, b = np.asarray(a, float), np.asarray(b, float)
-        mid = 0.5 * (a + b)
-        half = 0.5 * np.sqrt(((b - a) ** 2).sum(axis=1))
-        seg_parts, idx_parts = [], []
-        # Top down, only below cells that were neither far nor under a far one: a cell
-        # counts where it is far and no ancestor counted already.
-        top = len(self._levels) - 1
-        cells = len(self._levels[top][0])
-        s = np.repeat(np.arange(len(a)), cells)
-        c = np.tile(np.arange(cells), len(a))
-        for depth in range(top, -1, -1):
-            lo, hi, extent, _, start = self._levels[depth]
-            m = mid[s]
-            gap = m - np.clip(m, lo[c], hi[c])
-            dist = np.sqrt((gap ** 2).sum(axis=1)) - half[s]
-            far = (dist >= self.radius) & (dist >= OPENING * extent[c])
-            seg_parts.append(s[far])
-            idx_parts.append(start + c[far])
-            s, c = s[~far], c[~far]
-            if depth:
-                s, c = _expand(s, c, *self._children[depth])
-            # (s, c) in the order of a segments x cells table read row by row.
-            order = np.lexsort((c, s))
-            s, c = s[order], c[order]
-        # Leaves neither counted nor under a counted cell: their members one by one.
-        s, c = _expand(s, c, self._members, self._member_start)
-        seg_parts.append(s)
-        idx_parts.append(c)
-        seg = np.concatenate(seg_parts).astype(np.int64)
-        idx = np.concatenate(idx_parts).astype(np.int64)
-        order = np.argsort(seg, kind='stable')
-        return seg[order], idx[order]
-
-
-def _expand(s: NDArray, c: NDArray, items: NDArray, first: NDArray) -> tuple[NDArray, NDArray]:
-    """Each (s, c) as (s, item) for every item of c (CSR: items[first[c]:first[c + 1]])."""
-    counts = first[c + 1] - first[c]
-    at = np.repeat(first[c] - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
-    return np.repeat(s, counts), items[at]
+        firsts, items, base = [], [], 0
+        for depth in range(len(self._levels)):
+            if depth == 0:
+                kids, start = self._members, self._member_start
+            else:
+                kids, start = self._children[depth]
+                kids = kids + (self._levels[depth - 1][4] - n)
+            firsts.append(start[:-1] + base)
+            items.append(kids)
+            base += len(kids)
+        self.n_threats = n
+        self.n_leaf = len(self._levels[0][0])
+        self.top = self._levels[-1][4] - n
+        self.opening = OPENING
+        self.first = np.ascontiguousarray(np.concatenate(firsts + [[base]]), np.int64)
+        self.items = np.ascontiguousarray(np.concatenate(items), np.int64)
+        self.cell_lo = np.ascontiguousarray(np.vstack([lv[0] for lv in self._levels]))
+        self.cell_hi = np.ascontiguousarray(np.vstack([lv[1] for lv in self._levels]))
+        self.cell_extent = np.ascontiguousarray(np.concatenate([lv[2] for lv in self._levels]))
 
 
 def _csr(parent: NDArray, count: int) -> tuple[NDArray, NDArray]:
