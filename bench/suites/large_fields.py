@@ -129,7 +129,7 @@ def npy_scenario(n: int, seed: int, k: int, folder: Path) -> Path:
             np.column_stack([field.positions, field.intensities]))
     path = folder / f'field_{n}_{k}.yaml'
     path.write_text(yaml.safe_dump({
-        'box': {'min': field.lo.tolist(), 'max': field.hi.tolist()},
+        'bounds': {'min': field.lo.tolist(), 'max': field.hi.tolist()},
         'start': field.start.tolist(), 'goal': field.goal.tolist(),
         'threats_file': f'threats_{n}_{k}.npy'}))
     return path

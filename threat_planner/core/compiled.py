@@ -128,6 +128,11 @@ def _workload() -> None:
         plan(moved, s, t, box, PlannerConfig(**extra), warm_start=first)
     for method in ('paper', 'improved'):
         plan(small, s, t, box, PlannerConfig(method=method))
+    # Every plan reports its detection; from COMPILED_THREATS threats on the compiled
+    # hazard (detection.kernels, JIT only), which would otherwise compile in a user's plan.
+    from threat_planner.core.detection.hazard import path_hazard
+    from threat_planner.core.detection.model import DetectionModel
+    path_hazard(np.stack([s, t]), crowded.positions, crowded.intensities, DetectionModel())
     heights = 10.0 + 5.0 * np.sin(np.linspace(0.0, 3.0, 11))[None, :] * np.ones((11, 1))
     terrain = Terrain.from_arrays([0.0, 0.0], 10.0, heights, clearance=2.0, masking=True)
     air = Airspace((make_zone('sphere', 'no_fly_zones[0]', center=[50.0, 50.0, 50.0],

@@ -27,6 +27,11 @@ from threat_planner.core.detection.model import DetectionModel, p_detect_scan, s
 __all__ = ['DetectionReport', 'Layout', 'hazard_and_gradient', 'layout', 'path_hazard', 'profile',
            'PIECE', 'TOLERANCE']
 
+#: Threats from which :func:`path_hazard` sums on the compiled kernel
+#: (:func:`.kernels.compiled_hazard`, the same sums up to rounding), not numpy's: where a
+#: plan loads numba anyway (core._aot.PARALLEL_THREATS). Every plan's report runs it: at
+#: 10,000 threats numpy took 1.08 s and 435 MiB of temporaries, twice the plan's RSS.
+COMPILED_THREATS = 100
 #: Gauss-Legendre nodes per piece.
 ORDER = 8
 #: Longest piece, as a fraction of the pair's closest approach (or detection range).
@@ -288,13 +293,16 @@ def path_hazard(points: NDArray, positions: NDArray, intensities: NDArray,
     # Beyond a radar's range (SNR < 1 all along) P_d is smooth on the distance's scale;
     # inside it, a steady target's P_d rises from P_fa to 1 over a few % of it.
     settled = (length <= SETTLED * scale) & (top < 1.0)
-    far, _ = hazard_and_gradient(points, positions, intensities, model,
-                                 _layout(_subset(pairs, settled), 1), want_grad=False)
+    evaluate = hazard_and_gradient
+    if len(positions) >= COMPILED_THREATS:
+        from threat_planner.core.detection.kernels import compiled_hazard as evaluate
+    far, _ = evaluate(points, positions, intensities, model,
+                      _layout(_subset(pairs, settled), 1), want_grad=False)
     near_pairs = _subset(pairs, ~settled)
     refine, previous = 1, None
     while True:
-        per, _ = hazard_and_gradient(points, positions, intensities, model,
-                                     _layout(near_pairs, refine), want_grad=False)
+        per, _ = evaluate(points, positions, intensities, model,
+                          _layout(near_pairs, refine), want_grad=False)
         per = per + far
         total = float(per.sum())
         if previous is not None and abs(total - previous) <= TOLERANCE * max(total, 1e-300):
