@@ -36,6 +36,8 @@ SUITES: dict[str, tuple[str, str, str]] = {
                'kill -9 the node while it plans and records, SIGINT a long plan'),
     'flood': ('bench.suites.flood', 'main',
               'flood the node with threat updates: coalesced, responsive, no backlog'),
+    'omp_wait': ('bench.suites.omp_wait', 'main',
+                 'the parallel kernels\' OpenMP wait policy, quiet and beside busy loops'),
     'large_fields': ('bench.suites.large_fields', 'main',
                      'issue 42 speed: 10,000 and 100,000 fresh threats, 20 threats, ratios'),
     'flights': ('bench.suites.flights', 'main',

@@ -127,3 +127,28 @@ def test_compile_check_loads_what_the_cache_holds():
                        cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     assert p.stdout.startswith('loaded ') and 'compiled kernels in' in p.stdout
+
+
+@pytest.mark.parametrize('given, spins', [(None, '0'), ('ACTIVE', '30000000000')])
+def test_the_parallel_kernels_threads_sleep_between_loops_unless_told(given, spins):
+    """libgomp's own report (OMP_DISPLAY_ENV) of a plan on the parallel kernels.
+
+    Unset, libgomp spins 300,000 times before it sleeps (its report says PASSIVE either
+    way); the package's PASSIVE makes that 0.
+    """
+    env = {k: v for k, v in os.environ.items() if k != 'OMP_WAIT_POLICY'}
+    env.update(OMP_DISPLAY_ENV='VERBOSE', **({} if given is None else {'OMP_WAIT_POLICY': given}))
+    code = ('import numpy as np\n'
+            'from threat_planner import Box, plan, PlannerConfig, ThreatField\n'
+            'rng = np.random.default_rng(0)\n'
+            'threats = ThreatField.from_arrays(rng.uniform(5, 95, (400, 3)), '
+            'np.full(400, 1e3))\n'
+            'plan(threats, [0, 0, 50], [100, 100, 50], '
+            'Box.from_corners([0, 0, 0], [100, 100, 100]), PlannerConfig())\n'
+            'import numba\n'
+            'print(numba.threading_layer())\n')
+    done = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True,
+                          text=True, check=True)
+    if done.stdout.strip().splitlines()[-1] != 'omp':
+        pytest.skip('numba runs another threading layer here')
+    assert f"GOMP_SPINCOUNT = '{spins}'" in done.stderr, done.stderr[-2000:]

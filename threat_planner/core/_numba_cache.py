@@ -139,6 +139,11 @@ def configure() -> None:
     global _configured
     if _configured:
         return
+    # libgomp (numba's omp layer) reads this when the first parallel kernel loads it: its
+    # threads then sleep between parallel loops instead of spinning. Thousands of short
+    # loops a plan, beside two busy processes: 1.1-2.4 s a 1,000-threat plan spinning,
+    # 0.10-0.15 s sleeping (bench/results/omp_wait.md). A user's own setting stands.
+    os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')
     from numba.core import caching
     impl = getattr(caching, 'CacheImpl', None) or caching._CacheImpl
     impl._locator_classes = [_make_locator()] + [
