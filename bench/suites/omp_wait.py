@@ -9,9 +9,15 @@ plans beside two busy loops took 1.1-2.4 s a 1,000-threat plan against 0.10-0.15
 ``OMP_WAIT_POLICY=PASSIVE``. This suite plans fresh uniform fields
 (:func:`bench.toolkit.fresh_fields.uniform`) of 100, 1,000 and 10,000 threats, w 0.5,
 default limits, each policy in its own fresh process, taking turns, quiet and beside two
-busy loops. The column ``package`` is the process as the package leaves it (PASSIVE,
-:func:`threat_planner.core._numba_cache.configure`); ``libgomp default`` is what it did
-before; ``ACTIVE`` spins always. Writes ``bench/results/omp_wait.{md,json}``.
+busy loops. The column ``package`` is the process as the package leaves it (spin
+``_numba_cache.SPIN_COUNT`` times, then sleep: :func:`threat_planner.core._numba_cache.
+configure`); ``libgomp default`` is what it did before (spin 300,000 times); ``PASSIVE``
+never spins, ``ACTIVE`` always. A first run (seed 1796649451, one process a cell) also
+had spin counts of 30,000 (erratic beside the busy loops: 2.1 s at 100 threats, 6.2 s at
+10,000) and 3,000 (quiet as fast as libgomp's default: 53 / 153 / 613 ms against 56 /
+151 / 633 ms at 100 / 1,000 / 10,000 threats; beside the busy loops 250 / 303 / 2,044 ms
+against 203 / 7,116 / 1,891 ms), which the package took. Writes
+``bench/results/omp_wait.{md,json}``.
 
 Usage: ``python -m bench omp_wait [--rounds R] [--seed S]``
 """
@@ -30,10 +36,12 @@ from bench.toolkit.repo import command, machine, RESULTS, ROOT
 
 BUSY = 'import time\nt = time.time() + 900\nwhile time.time() < t: pass'
 SIZES = (100, 1000, 10_000)
-#: Policy -> the environment a process gets (None: the package's own).
-#: An empty value is invalid to libgomp, which then keeps its default (spin 300,000 times
-#: before sleeping), and it stops the package's own setting (an existing value stands).
-POLICIES = {'package': None, 'libgomp default': '', 'ACTIVE': 'ACTIVE'}
+#: Policy -> what a process's environment gets ({}: the package's own setting). An empty
+#: OMP_WAIT_POLICY is invalid to libgomp, which then keeps its default (spin
+#: GOMP_SPINCOUNT = 300,000 times before sleeping), and it stops the package's own
+#: setting (a value that is there stands).
+POLICIES = {'package': {}, 'libgomp default': {'OMP_WAIT_POLICY': ''},
+            'PASSIVE': {'OMP_WAIT_POLICY': 'PASSIVE'}, 'ACTIVE': {'OMP_WAIT_POLICY': 'ACTIVE'}}
 CHILD = '''
 import json, sys, time
 from bench.toolkit.fresh_fields import make_field
@@ -52,12 +60,10 @@ print(json.dumps({'ms': times, 'J': r.cost.J, 'policy': os.environ.get('OMP_WAIT
 '''
 
 
-def run(n: int, seed: int, repeats: int, policy: str | None) -> dict:
-    """Plan in a fresh process with OMP_WAIT_POLICY = policy (None: left to the package)."""
-    env = {k: v for k, v in os.environ.items() if k != 'OMP_WAIT_POLICY'}
-    env['PYTHONPATH'] = str(ROOT)
-    if policy is not None:
-        env['OMP_WAIT_POLICY'] = policy
+def run(n: int, seed: int, repeats: int, policy: dict) -> dict:
+    """Plan in a fresh process with the variables of `policy` (none: the package's own)."""
+    env = {k: v for k, v in os.environ.items() if k not in ('OMP_WAIT_POLICY', 'GOMP_SPINCOUNT')}
+    env.update(policy, PYTHONPATH=str(ROOT))
     done = subprocess.run([sys.executable, '-c', CHILD, str(n), str(seed), str(repeats)],
                           env=env, capture_output=True, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -88,8 +94,8 @@ def markdown(raw: dict, meta: dict) -> str:
              f"`{meta['command']}` on {meta['date']}, seed {meta['seed']}, {meta['machine']}; "
              f"each cell the median over {meta['rounds']} fresh processes x {meta['repeats']} "
              'warm plans (fresh uniform fields, w 0.5, default limits); the policies took '
-             'turns. `package` = PASSIVE (the package\'s own setting); `libgomp default` = '
-             'the variable unset, as before it.', '',
+             'turns. `package` = spin 3,000 times, then sleep (the package\'s own setting); '
+             '`libgomp default` = spin 300,000 times, as before it.', '',
              '| load | threats | ' + ' | '.join(POLICIES) + ' | J the same |',
              '|---|---:|' + '---:|' * len(POLICIES) + '---|']
     for load, sizes in raw.items():

@@ -129,15 +129,18 @@ def test_compile_check_loads_what_the_cache_holds():
     assert p.stdout.startswith('loaded ') and 'compiled kernels in' in p.stdout
 
 
-@pytest.mark.parametrize('given, spins', [(None, '0'), ('ACTIVE', '30000000000')])
-def test_the_parallel_kernels_threads_sleep_between_loops_unless_told(given, spins):
+@pytest.mark.parametrize('given, spins', [
+    ({}, str(_numba_cache.SPIN_COUNT)), ({'OMP_WAIT_POLICY': 'ACTIVE'}, '30000000000'),
+    ({'GOMP_SPINCOUNT': '77'}, '77')])
+def test_the_parallel_kernels_threads_sleep_soon_after_a_loop_unless_told(given, spins):
     """libgomp's own report (OMP_DISPLAY_ENV) of a plan on the parallel kernels.
 
-    Unset, libgomp spins 300,000 times before it sleeps (its report says PASSIVE either
-    way); the package's PASSIVE makes that 0.
+    Unset, libgomp spins 300,000 times before it sleeps; the package makes that
+    SPIN_COUNT, and a user's setting stands.
     """
-    env = {k: v for k, v in os.environ.items() if k != 'OMP_WAIT_POLICY'}
-    env.update(OMP_DISPLAY_ENV='VERBOSE', **({} if given is None else {'OMP_WAIT_POLICY': given}))
+    env = {k: v for k, v in os.environ.items()
+           if k not in ('OMP_WAIT_POLICY', 'GOMP_SPINCOUNT')}
+    env.update(given, OMP_DISPLAY_ENV='VERBOSE')
     code = ('import numpy as np\n'
             'from threat_planner import Box, plan, PlannerConfig, ThreatField\n'
             'rng = np.random.default_rng(0)\n'

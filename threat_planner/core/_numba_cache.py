@@ -38,6 +38,9 @@ SOURCES = ('cost/closed_form.py', 'cost/pair_integrals.py', 'cost/kernels.py',
 #: not import them, so a process that plans on the AOT kernels loads no numba.
 JIT_ONLY = ('detection/kernels.py',)
 
+#: Spins of an idle parallel-kernel thread before it sleeps (libgomp's GOMP_SPINCOUNT).
+SPIN_COUNT = 3000
+
 _CORE = Path(__file__).resolve().parent
 _configured = False
 
@@ -140,10 +143,13 @@ def configure() -> None:
     if _configured:
         return
     # libgomp (numba's omp layer) reads this when the first parallel kernel loads it: its
-    # threads then sleep between parallel loops instead of spinning. Thousands of short
-    # loops a plan, beside two busy processes: 1.1-2.4 s a 1,000-threat plan spinning,
-    # 0.10-0.15 s sleeping (bench/results/omp_wait.md). A user's own setting stands.
-    os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')
+    # threads then spin SPIN_COUNT times after a parallel loop, not 300,000, before they
+    # sleep. A plan runs thousands of short loops; beside two busy processes a 1,000-
+    # threat plan took 7.1 s with libgomp's spin and 0.3 s with this one, quiet 151 and
+    # 153 ms (passive, no spin: 0.25 s and 182 ms; bench/results/omp_wait.md). A user's
+    # own OMP_WAIT_POLICY or GOMP_SPINCOUNT stands.
+    if 'OMP_WAIT_POLICY' not in os.environ:
+        os.environ.setdefault('GOMP_SPINCOUNT', str(SPIN_COUNT))
     from numba.core import caching
     impl = getattr(caching, 'CacheImpl', None) or caching._CacheImpl
     impl._locator_classes = [_make_locator()] + [
