@@ -22,6 +22,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from threat_planner.core import _aot
 from threat_planner.core.detection.model import DetectionModel, p_detect_scan, snr
 
 __all__ = ['DetectionReport', 'Layout', 'hazard_and_gradient', 'layout', 'path_hazard', 'profile',
@@ -29,9 +30,10 @@ __all__ = ['DetectionReport', 'Layout', 'hazard_and_gradient', 'layout', 'path_h
 
 #: Threats from which :func:`path_hazard` sums on the compiled kernel
 #: (:func:`.kernels.compiled_hazard`, the same sums up to rounding), not numpy's: where a
-#: plan loads numba anyway (core._aot.PARALLEL_THREATS). Every plan's report runs it: at
-#: 10,000 threats numpy took 1.08 s and 435 MiB of temporaries, twice the plan's RSS.
-COMPILED_THREATS = 100
+#: plan loads numba anyway (its edge costs go to the JIT kernels). Every plan's report
+#: runs it: at 10,000 threats numpy took 1.08 s and 435 MiB of temporaries, twice the
+#: plan's RSS.
+COMPILED_THREATS = _aot.PARALLEL_THREATS
 #: Gauss-Legendre nodes per piece.
 ORDER = 8
 #: Longest piece, as a fraction of the pair's closest approach (or detection range).

@@ -59,7 +59,7 @@ class FarField:
         cell_of = cell_of.reshape(-1)
         cell_of_leaf = cell_of
         # Levels bottom up: (members' box lo, hi, its largest edge, parent, first index).
-        self._levels: list[tuple] = []
+        levels: list[tuple] = []
         extra_pos, extra_f, offset = [], [], n
         while True:
             m = len(cells)
@@ -72,48 +72,38 @@ class FarField:
                                        for k in range(3)], axis=1) / total[:, None])
             extra_f.append(total)
             if m <= TOP_CELLS:
-                self._levels.append((lo, hi, (hi - lo).max(axis=1), None, offset))
+                levels.append((lo, hi, (hi - lo).max(axis=1), None, offset))
                 break
             # The keys halve exactly, so each cell lies in one parent.
             cells, parent = np.unique(cells // 2, axis=0, return_inverse=True)
             parent = parent.reshape(-1)
-            self._levels.append((lo, hi, (hi - lo).max(axis=1), parent, offset))
+            levels.append((lo, hi, (hi - lo).max(axis=1), parent, offset))
             cell_of = parent[cell_of]
             offset += m
         self.positions = np.ascontiguousarray(np.vstack([pos] + extra_pos))
         self.intensities = np.ascontiguousarray(np.concatenate([f] + extra_f))
-        # Children of each cell (CSR, by level), and the members of each leaf.
-        self._children = {d: _csr(self._levels[d - 1][3], len(self._levels[d][0]))
-                          for d in range(1, len(self._levels))}
-        self._members, self._member_start = _csr(cell_of_leaf, len(self._levels[0][0]))
-        self._flatten(n)
-
-    def _flatten(self, n: int) -> None:
-        """Every level's cells in one table, for the compiled walk (cost.far_kernels).
-
-        Cell g (bottom up, level by level) is pseudo-threat ``n + g`` of :attr:`positions`;
-        ``items[first[g]:first[g + 1]]`` are its children's cell numbers, or a leaf's
-        threats.
-        """
+        # Every level's cells in one table, for the compiled walk (cost.far_kernels): cell
+        # g (bottom up, level by level) is pseudo-threat n + g of positions, and
+        # items[first[g]:first[g + 1]] are its children's cell numbers, or a leaf's threats.
         firsts, items, base = [], [], 0
-        for depth in range(len(self._levels)):
+        for depth in range(len(levels)):
             if depth == 0:
-                kids, start = self._members, self._member_start
+                kids, start = _csr(cell_of_leaf, len(levels[0][0]))
             else:
-                kids, start = self._children[depth]
-                kids = kids + (self._levels[depth - 1][4] - n)
+                kids, start = _csr(levels[depth - 1][3], len(levels[depth][0]))
+                kids = kids + (levels[depth - 1][4] - n)
             firsts.append(start[:-1] + base)
             items.append(kids)
             base += len(kids)
         self.n_threats = n
-        self.n_leaf = len(self._levels[0][0])
-        self.top = self._levels[-1][4] - n
+        self.n_leaf = len(levels[0][0])
+        self.top = levels[-1][4] - n
         self.opening = OPENING
         self.first = np.ascontiguousarray(np.concatenate(firsts + [[base]]), np.int64)
         self.items = np.ascontiguousarray(np.concatenate(items), np.int64)
-        self.cell_lo = np.ascontiguousarray(np.vstack([lv[0] for lv in self._levels]))
-        self.cell_hi = np.ascontiguousarray(np.vstack([lv[1] for lv in self._levels]))
-        self.cell_extent = np.ascontiguousarray(np.concatenate([lv[2] for lv in self._levels]))
+        self.cell_lo = np.ascontiguousarray(np.vstack([lv[0] for lv in levels]))
+        self.cell_hi = np.ascontiguousarray(np.vstack([lv[1] for lv in levels]))
+        self.cell_extent = np.ascontiguousarray(np.concatenate([lv[2] for lv in levels]))
 
 
 def _csr(parent: NDArray, count: int) -> tuple[NDArray, NDArray]:
