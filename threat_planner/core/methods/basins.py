@@ -22,7 +22,8 @@ from threat_planner.core.optimise.optimisation import minimise_cost
 from threat_planner.core.optimise.smoothing import resample
 from threat_planner.core.world.threats import Box
 
-__all__ = ['COARSE_SEGMENTS', 'RUNNER_UP_MARGIN', 'SCREEN_TIE', 'basin_lead', 'known_lead',
+__all__ = ['COARSE_SEGMENTS', 'COARSE_TOLERANCE', 'RUNNER_UP_MARGIN', 'SCREEN_TIE',
+           'SURFACE_DENSE_PAIRS', 'basin_lead', 'known_lead',
            'refined_margin', 'runner_up_gate', 'runner_up_lead', 'same_basin',
            'slope_screening']
 
@@ -32,6 +33,12 @@ COARSE_SEGMENTS = 8
 #: further (on the 21 bundled cases, at the coarsest level 12 of 16 runners-up were in the
 #: winner's basin and 2 were 22 % and 124 % above it; 2 were refined to the end).
 RUNNER_UP_MARGIN = 0.01
+#: Stopping tolerance of the coarse screening minimisation (its segments, at which basins
+#: are told apart too: COARSE_SEGMENTS).
+COARSE_TOLERANCE = 1e-4
+#: The surface lattice's exact-cost limit in a crowded field without flight limits
+#: (measured beside refining.OPTIMISER_CROWDED_DENSE_PAIRS, see there).
+SURFACE_DENSE_PAIRS = 500_000
 #: L-BFGS iterations and augmented Lagrangian rounds of the slope-held screening (a
 #: ranking: measured against 200 and 6 on the 21 bundled cases, 15 % less time, final J
 #: within 0.04 % either way).

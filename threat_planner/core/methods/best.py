@@ -16,9 +16,12 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from threat_planner.core.methods.basins import (basin_lead, COARSE_SEGMENTS, known_lead,
+from threat_planner.core.methods.basins import (basin_lead, COARSE_SEGMENTS, COARSE_TOLERANCE,
+                                                known_lead, SURFACE_DENSE_PAIRS,
                                                 refined_margin, runner_up_gate, same_basin,
                                                 slope_screening)
+from threat_planner.core.methods.limited_basins import (free_first, LIMITED_BASINS_MAX_THREATS,
+                                                        volume_basins)
 from threat_planner.core.methods.problem import Candidate, Problem, smooth_route
 from threat_planner.core.methods.refining import (converge, counts_far_threats, lower,
                                                   optimiser_cutoff, refine, usable,
@@ -30,12 +33,6 @@ from threat_planner.core.optimise.smoothing import check_angles, resample
 
 __all__ = ['network_routes', 'plan_best', 'repair']
 
-#: Stopping tolerance of the coarse screening minimisation (its segments, at which basins
-#: are told apart too: basins.COARSE_SEGMENTS).
-COARSE_TOLERANCE = 1e-4
-#: The surface lattice's exact-cost limit in a crowded field without flight limits
-#: (measured beside refining.OPTIMISER_CROWDED_DENSE_PAIRS, see there).
-SURFACE_DENSE_PAIRS = 500_000
 #: Screened basins refined, best first, until one meets the flight limits.
 FEASIBILITY_TRIES = 3
 #: Basins refined when the limits bind (the best feasible one kept).
@@ -197,6 +194,11 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
         # A polished winner is converged once more here: not work done twice, that run
         # lowered two of n20 seed 1 w 0.8's moved plans by a further 2e-5 and 4e-5.
         best = converge(p, best)
+    if bound and usable(best) and len(threats) <= LIMITED_BASINS_MAX_THREATS:
+        # Issue 42: limited basins the cold refinement misses, as additions (never above).
+        if cfg.surface_seeds and bounds is not None:
+            best = volume_basins(p, best, refined, routes[0], cutoff, _refine_seed)
+        best = free_first(p, best, screened)
     if not bound and not p.limits.any_constraint:
         best, margin = _lattice_alternatives(p, best, order, routes[0], margin)
     # The warm-start rule's lead: the screening's where the limits did not bind; where

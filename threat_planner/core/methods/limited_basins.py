@@ -1,0 +1,106 @@
+"""Limited basins method ``best`` adds once the limits bound: never above its winner.
+
+The cold refinement holds the flight limits from its coarse levels on and ranks the basins
+by a slope-held screening at 8 segments; both can miss the limited optimum (issue 42's
+limited yardstick found paths 4-7 % below on fresh fields). Two additions run after the
+winner is converged, each kept only where it ends lower: the volume lattice's routes
+refined as runners-up (:func:`volume_basins`), and the best box-only basins refined from
+their limit-free optimum at full resolution (:func:`free_first`).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from threat_planner.core.methods.basins import (COARSE_SEGMENTS, COARSE_TOLERANCE, same_basin,
+                                                slope_screening, SURFACE_DENSE_PAIRS)
+from threat_planner.core.methods.problem import Candidate, Problem
+from threat_planner.core.methods.refining import (converge, counts_far_threats,
+                                                  optimiser_cutoff, refine, usable)
+from threat_planner.core.network.seeds import volume_routes
+from threat_planner.core.optimise.optimisation import minimise_cost
+from threat_planner.core.optimise.smoothing import resample
+
+__all__ = ['FREE_FIRST_BASINS', 'FREE_FIRST_CONVERGE', 'LIMITED_BASINS_MAX_THREATS',
+           'free_first', 'volume_basins']
+
+#: Largest field where, once the limits bound, the volume routes and the limit-free
+#: optima are tried too (:func:`volume_basins`, :func:`free_first`). Measured on the
+#: gate's fresh seed 1796647071: at 1,000-3,000 threats they lowered 10 of 60 plans by up
+#: to 7.7 % for 1.7x the time; at 10,000 they cost 1.0 s a plan and lowered none.
+LIMITED_BASINS_MAX_THREATS = 3000
+#: Distinct box-only screened basins refined from their limit-free optimum. On that
+#: seed's 90 limited cases (20-300 threats) 2 and 3 found the same plans but one (0.02 %).
+FREE_FIRST_BASINS = 2
+#: Such a candidate is converged when within this fraction of best's J (a converge
+#: lowered one from 341.6 to 327.6, below the 338.7 that had won).
+FREE_FIRST_CONVERGE = 0.05
+
+
+def volume_basins(p: Problem, best: Candidate, refined: list[Candidate], route: list[int],
+                  cutoff: float | None, refine_seed: Callable) -> Candidate:
+    """Return best, or a lower one refined from the volume lattice's routes (limits bound).
+
+    Screened with the others, the volume routes displaced basins that had won (a fresh
+    3,000-threat plan 0.6 % higher); here they are slope-held screened on their own and
+    refined as gated runners-up (``refine_seed``: best's) after best is known, so they
+    only add. On the gate's seed 1796647071 they found coplanar n100 f0 w 0.8 6.4 % lower
+    and strongweak n300 f1 w 0.5 3.8 % lower (the limited yardstick's 377.39: 377.54).
+    """
+    dense = SURFACE_DENSE_PAIRS if counts_far_threats(p) else None
+    lines = volume_routes(p.threats, p.s, p.t, p.box, p.config.w, dense_pairs=dense)
+    screened = sorted(((p.cost(line).J, f'volume route {i}', [], line)
+                       for i, line in enumerate(lines)), key=lambda e: e[0])
+    if p.limits.climb_on or p.limits.dive_on:
+        entries, _, _ = slope_screening(p, screened, p.box, cutoff, set(), COARSE_TOLERANCE)
+    else:
+        entries = [(name, seq, line, False) for _, name, seq, line in screened]
+    for entry in entries:
+        if any(same_basin(p, entry[2], c.final) for c in refined if usable(c)):
+            continue
+        cand, _ = refine_seed(p, entry, route, best, True)
+        if cand is None or not usable(cand):
+            continue
+        refined.append(cand)
+        if cand.cost.J < best.cost.J:
+            cand = converge(p, cand)
+            if cand.cost.J < best.cost.J:
+                best = cand
+    return best
+
+
+def free_first(p: Problem, best: Candidate, screened: list) -> Candidate:
+    """Return best, or a lower one refined from a basin's limit-free optimum (limits bound).
+
+    The cold refinement holds the limits from its coarse levels on, and can end in another
+    limited basin than the one next to the limit-free optimum: on uniform n100 f0 w 0.8 of
+    seed 1796647071 it ended at 338.71, the limited yardstick (SLSQP from its grid routes)
+    at 316.75. Each of the FREE_FIRST_BASINS best distinct box-only screened basins is
+    minimised within the box alone at n_points, then held to the limits from there as a
+    warm replan is (the rounds alone, at n_points): 314.55 from the second basin. A basin
+    whose limit-free optimum is already at best's J is skipped: its limited one lies above.
+    """
+    n = p.config.n_points
+    cutoff = optimiser_cutoff(n, p)
+    picked: list[NDArray] = []
+    for j, name, seq, coarse in screened:
+        if len(picked) >= FREE_FIRST_BASINS:
+            break
+        key = resample(coarse, COARSE_SEGMENTS)
+        if not np.isfinite(j) or any(same_basin(p, key, k, resampled=True) for k in picked):
+            continue
+        picked.append(key)
+        free = minimise_cost(resample(coarse, n), p.threats, p.config.w, p.box,
+                             cutoff=cutoff).points
+        if not p.cost(free).J < best.cost.J:
+            continue
+        cand = refine(p, free, seq, f'{name}, from its limit-free optimum', warm=True)
+        if usable(cand) and cand.cost.J < (1.0 + FREE_FIRST_CONVERGE) * best.cost.J:
+            cand = converge(p, cand)
+            if cand.cost.J < best.cost.J:
+                cand.limits_bound = True
+                best = cand
+    return best
