@@ -6,7 +6,8 @@ surface routes are screened by a coarse minimisation of J (and again with the sl
 held), then the winners are refined on J itself within the box and the physical flight
 limits (:mod:`.optimisation`; an augmented Lagrangian where they bind), a feasible path
 beating any infeasible one, with a blend towards the straight line as the last resort.
-Refining one start and converging the winner are :mod:`.refining`'s.
+Where the limits bound, the basins :mod:`.limited_basins` adds are tried after the
+winner. Refining one start and converging the winner are :mod:`.refining`'s.
 """
 
 from __future__ import annotations
