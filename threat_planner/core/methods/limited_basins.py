@@ -21,20 +21,26 @@ from threat_planner.core.methods.problem import Candidate, Problem
 from threat_planner.core.methods.refining import (converge, counts_far_threats,
                                                   optimiser_cutoff, refine, usable)
 from threat_planner.core.network.seeds import volume_routes
-from threat_planner.core.optimise.optimisation import minimise_cost
+from threat_planner.core.optimise.optimisation import minimise_cost, PENALTY_START
 from threat_planner.core.optimise.smoothing import resample
 
-__all__ = ['FREE_FIRST_BASINS', 'FREE_FIRST_CONVERGE', 'LIMITED_BASINS_MAX_THREATS',
-           'free_first', 'volume_basins']
+__all__ = ['FREE_FIRST_BASINS', 'FREE_FIRST_CONVERGE', 'FREE_FIRST_LOOKS',
+           'LIMITED_BASINS_MAX_THREATS', 'free_first', 'volume_basins']
 
 #: Largest field where, once the limits bound, the volume routes and the limit-free
 #: optima are tried too (:func:`volume_basins`, :func:`free_first`). Measured on the
 #: gate's fresh seed 1796647071: at 1,000-3,000 threats they lowered 10 of 60 plans by up
 #: to 7.7 % for 1.7x the time; at 10,000 they cost 1.0 s a plan and lowered none.
 LIMITED_BASINS_MAX_THREATS = 3000
-#: Distinct box-only screened basins refined from their limit-free optimum. On that
-#: seed's 90 limited cases (20-300 threats) 2 and 3 found the same plans but one (0.02 %).
+#: Distinct limit-free optima refined under the limits (:func:`free_first`). On that seed's
+#: 90 limited cases (20-300 threats) 2 and 3 found the same plans but one (0.02 %).
 FREE_FIRST_BASINS = 2
+#: Box-only screened basins (distinct at the coarse resolution) minimised in the box alone
+#: in search of those: several screen into one limit-free optimum (clustered n300 f1 w 0.8
+#: of seed 1796664513: the first, second and fifth into 178.35), and the limited optimum
+#: came from the third distinct one (266.71 under the limits, the others 323.7-348.0).
+#: 4 and 6 found the same plans on that seed's 90 limited cases.
+FREE_FIRST_LOOKS = 4
 #: Such a candidate is converged when within this fraction of best's J (a converge
 #: lowered one from 341.6 to 327.6, below the 338.7 that had won).
 FREE_FIRST_CONVERGE = 0.05
@@ -78,16 +84,22 @@ def free_first(p: Problem, best: Candidate, screened: list) -> Candidate:
     The cold refinement holds the limits from its coarse levels on, and can end in another
     limited basin than the one next to the limit-free optimum: on uniform n100 f0 w 0.8 of
     seed 1796647071 it ended at 338.71, the limited yardstick (SLSQP from its grid routes)
-    at 316.75. Each of the FREE_FIRST_BASINS best distinct box-only screened basins is
-    minimised within the box alone at n_points, then held to the limits from there as a
-    warm replan is (the rounds alone, at n_points): 314.55 from the second basin. A basin
-    whose limit-free optimum is already at best's J is skipped: its limited one lies above.
+    at 316.75. Up to FREE_FIRST_LOOKS distinct box-only screened basins are minimised
+    within the box alone at n_points, and the first FREE_FIRST_BASINS distinct optima are
+    held to the limits from there by the rounds alone, at n_points, from the cold first
+    penalty (PENALTY_START): 314.55 from the second basin. A warm replan's penalty
+    (WARM_PENALTY) holds the nearest limited path to an optimum that breaks the limits
+    wide: on uniform n300 f0 w 0.8 of seed 1796664513 it kept a floor-hugging path with a
+    zigzag climb at the goal (425.61), from PENALTY_START the rounds climbed along the way
+    (407.77; the limited yardstick 406.29). An optimum already at best's J is skipped:
+    its limited one lies above.
     """
     n = p.config.n_points
     cutoff = optimiser_cutoff(n, p)
     picked: list[NDArray] = []
+    optima: list[NDArray] = []
     for j, name, seq, coarse in screened:
-        if len(picked) >= FREE_FIRST_BASINS:
+        if len(optima) >= FREE_FIRST_BASINS or len(picked) >= FREE_FIRST_LOOKS:
             break
         key = resample(coarse, COARSE_SEGMENTS)
         if not np.isfinite(j) or any(same_basin(p, key, k, resampled=True) for k in picked):
@@ -95,9 +107,13 @@ def free_first(p: Problem, best: Candidate, screened: list) -> Candidate:
         picked.append(key)
         free = minimise_cost(resample(coarse, n), p.threats, p.config.w, p.box,
                              cutoff=cutoff).points
+        if any(same_basin(p, free, k) for k in optima):
+            continue
+        optima.append(free)
         if not p.cost(free).J < best.cost.J:
             continue
-        cand = refine(p, free, seq, f'{name}, from its limit-free optimum', warm=True)
+        cand = refine(p, free, seq, f'{name}, from its limit-free optimum', warm=True,
+                      penalty=PENALTY_START)
         if usable(cand) and cand.cost.J < (1.0 + FREE_FIRST_CONVERGE) * best.cost.J:
             cand = converge(p, cand)
             if cand.cost.J < best.cost.J:
