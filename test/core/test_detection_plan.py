@@ -121,6 +121,21 @@ def test_every_plan_reports_its_detection_in_json():
     assert d['H'] == pytest.approx(exact.hazard, rel=1e-12)
 
 
+def test_a_result_with_another_path_reports_that_paths_detection():
+    # The in-flight trajectory and a path turned onto a heading are the plan's result with
+    # another path (dataclasses.replace): the detection read before must not carry over.
+    from dataclasses import replace
+    threats, s, t, box = small_field()
+    r = plan(threats, s, t, box, PlannerConfig())
+    before = r.detection.hazard
+    other = replace(r, path=np.vstack([r.path[:3], t]))
+    exact = path_hazard(other.path, threats.positions, threats.intensities,
+                        DetectionModel(speed_mps=r.speed_mps))
+    assert other.detection.hazard == pytest.approx(exact.hazard, rel=1e-12)
+    assert other.detection.hazard != pytest.approx(before, rel=1e-6)
+    assert r.detection.hazard == before
+
+
 def test_the_speed_shapes_a_detection_plan_and_not_a_paper_one():
     base = PlannerConfig(cost_model='detection')
     assert not base.plans_like(PlannerConfig(cost_model='detection', speed_mps=5.0))

@@ -104,7 +104,10 @@ class PlanResult:
     masking: object = None
     objective: float | None = None
     detection_status: str = ''
-    _detection: DetectionReport | None = field(default=None, repr=False, compare=False)
+    # Not an init field, so dataclasses.replace (a result with another path: the
+    # published in-flight trajectory, a path turned onto a heading) never carries it over.
+    _detection: DetectionReport | None = field(default=None, init=False, repr=False,
+                                               compare=False)
 
     @property
     def detection(self) -> DetectionReport:
