@@ -6,6 +6,7 @@ for seed 1796664513, HEAD 1c2867c's in each description): seed 1796647071's by 6
 4.0 % without the additions, seed 1796664513's by 4.8 % and 1.4 % with them as they were.
 """
 
+from functools import lru_cache
 from pathlib import Path
 import re
 
@@ -23,9 +24,15 @@ DATA = Path(__file__).resolve().parents[1] / 'data' / 'limited_basins'
 CASES = sorted(DATA.glob('*.yaml'))
 
 
-def _read(path: Path):
+@lru_cache(maxsize=None)
+def _loaded(path: Path):
+    """The case's scenario and its description on one line (each file read once)."""
     sc = load_scenario(path)
-    text = ' '.join(sc.description.split())
+    return sc, ' '.join(sc.description.split())
+
+
+def _read(path: Path):
+    sc, text = _loaded(path)
     w = float(re.search(r'_w(\d)p(\d+)_on$', path.stem).expand(r'\1.\2'))
     yard = float(re.search(r'limited yardstick J ([0-9.]+)', text)[1])
     before = float(re.search(r'without the limited basins J ([0-9.]+)', text)[1])
@@ -34,8 +41,7 @@ def _read(path: Path):
 
 def _head(path: Path) -> float:
     """J of HEAD 1c2867c (the additions before issue 42's second gate), where recorded."""
-    text = ' '.join(load_scenario(path).description.split())
-    found = re.search(r'HEAD 1c2867c J ([0-9.]+)', text)
+    found = re.search(r'HEAD 1c2867c J ([0-9.]+)', _loaded(path)[1])
     return float(found[1]) if found else float('nan')
 
 
