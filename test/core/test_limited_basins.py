@@ -3,7 +3,8 @@
 The fields are cases of the fresh gate where the limited yardstick ended below method best
 (``test/data/limited_basins``; the yardstick's J, the plan's without the additions and,
 for seed 1796664513, HEAD 1c2867c's in each description): seed 1796647071's by 6.9 % and
-4.0 % without the additions, seed 1796664513's by 4.8 % and 1.4 % with them as they were.
+4.0 % without the additions, seed 1796664513's by 4.8 % and 1.4 % with them as they were,
+seed 1796677082's by 5.2 % where no limit bound the winner (the additions did not run).
 """
 
 from functools import lru_cache
@@ -111,3 +112,17 @@ def test_screened_basins_with_one_limit_free_optimum_count_once(monkeypatch):
     monkeypatch.setattr(limited_basins, 'FREE_FIRST_LOOKS', limited_basins.FREE_FIRST_BASINS)
     r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=w))
     assert r.cost.J == pytest.approx(_head(path), rel=1e-3)
+
+
+def test_an_unbound_winner_still_looks_at_the_volume_routes(monkeypatch):
+    # The winner's box-only optimum met the limits, so one basin was refined and the
+    # volume lattice (screened only without limits) was never looked at: 456.57 as in
+    # HEAD 778836b. The screened basins' limit-free optima held to the limits give 452.45,
+    # the volume routes' one 434.03 (the yardstick 433.98).
+    path = DATA / 'fresh_s1796677082_uniform_n300_f0_w0p2_on.yaml'
+    sc, w, yard, before = _read(path)
+    r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=w))
+    assert 'volume route' in r.seed and 'limit-free optimum' in r.seed
+    monkeypatch.setattr(best, 'volume_lines', lambda p: [])
+    r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=w))
+    assert 1.03 * yard < r.cost.J < before

@@ -25,7 +25,7 @@ from threat_planner.core.optimise.optimisation import minimise_cost, PENALTY_STA
 from threat_planner.core.optimise.smoothing import resample
 
 __all__ = ['FREE_FIRST_BASINS', 'FREE_FIRST_CONVERGE', 'FREE_FIRST_LOOKS',
-           'LIMITED_BASINS_MAX_THREATS', 'free_first', 'volume_basins']
+           'LIMITED_BASINS_MAX_THREATS', 'free_first', 'volume_basins', 'volume_lines']
 
 #: Largest field where, once the limits bound, the volume routes and the limit-free
 #: optima are tried too (:func:`volume_basins`, :func:`free_first`). Measured on the
@@ -46,20 +46,25 @@ FREE_FIRST_LOOKS = 4
 FREE_FIRST_CONVERGE = 0.05
 
 
+def volume_lines(p: Problem) -> list[tuple[float, str, list, NDArray]]:
+    """Return the volume lattice's routes as screened entries ``(J, name, [], line)``."""
+    dense = SURFACE_DENSE_PAIRS if counts_far_threats(p) else None
+    lines = volume_routes(p.threats, p.s, p.t, p.box, p.config.w, dense_pairs=dense)
+    return sorted(((p.cost(line).J, f'volume route {i}', [], line)
+                   for i, line in enumerate(lines)), key=lambda e: e[0])
+
+
 def volume_basins(p: Problem, best: Candidate, refined: list[Candidate], route: list[int],
-                  cutoff: float | None, refine_seed: Callable) -> Candidate:
+                  cutoff: float | None, refine_seed: Callable, screened: list) -> Candidate:
     """Return best, or a lower one refined from the volume lattice's routes (limits bound).
 
     Screened with the others, the volume routes displaced basins that had won (a fresh
-    3,000-threat plan 0.6 % higher); here they are slope-held screened on their own and
-    refined as gated runners-up (``refine_seed``: best's) after best is known, so they
-    only add. On the gate's seed 1796647071 they found coplanar n100 f0 w 0.8 6.4 % lower
-    and strongweak n300 f1 w 0.5 3.8 % lower (the limited yardstick's 377.39: 377.54).
+    3,000-threat plan 0.6 % higher); here they (``screened``: :func:`volume_lines`) are
+    slope-held screened on their own and refined as gated runners-up (``refine_seed``:
+    best's) after best is known, so they only add. On the gate's seed 1796647071 they
+    found coplanar n100 f0 w 0.8 6.4 % lower and strongweak n300 f1 w 0.5 3.8 % lower
+    (the limited yardstick's 377.39: 377.54).
     """
-    dense = SURFACE_DENSE_PAIRS if counts_far_threats(p) else None
-    lines = volume_routes(p.threats, p.s, p.t, p.box, p.config.w, dense_pairs=dense)
-    screened = sorted(((p.cost(line).J, f'volume route {i}', [], line)
-                       for i, line in enumerate(lines)), key=lambda e: e[0])
     if p.limits.climb_on or p.limits.dive_on:
         entries, _, _ = slope_screening(p, screened, p.box, cutoff, set(), COARSE_TOLERANCE)
     else:
@@ -78,8 +83,8 @@ def volume_basins(p: Problem, best: Candidate, refined: list[Candidate], route: 
     return best
 
 
-def free_first(p: Problem, best: Candidate, screened: list) -> Candidate:
-    """Return best, or a lower one refined from a basin's limit-free optimum (limits bound).
+def free_first(p: Problem, best: Candidate, screened: list, lattice: list = ()) -> Candidate:
+    """Return best, or a lower one refined from a basin's limit-free optimum (limits on).
 
     The cold refinement holds the limits from its coarse levels on, and can end in another
     limited basin than the one next to the limit-free optimum: on uniform n100 f0 w 0.8 of
@@ -92,31 +97,50 @@ def free_first(p: Problem, best: Candidate, screened: list) -> Candidate:
     wide: on uniform n300 f0 w 0.8 of seed 1796664513 it kept a floor-hugging path with a
     zigzag climb at the goal (425.61), from PENALTY_START the rounds climbed along the way
     (407.77; the limited yardstick 406.29). An optimum already at best's J is skipped:
-    its limited one lies above.
+    its limited one lies above. Each of the ``lattice`` entries (:func:`volume_lines`,
+    given where no limit bound best) is looked at after those, in a basin not looked at
+    already.
     """
-    n = p.config.n_points
-    cutoff = optimiser_cutoff(n, p)
-    picked: list[NDArray] = []
-    optima: list[NDArray] = []
-    for j, name, seq, coarse in screened:
-        if len(optima) >= FREE_FIRST_BASINS or len(picked) >= FREE_FIRST_LOOKS:
+    looks = _Looks(p)
+    for entry in screened:
+        if len(looks.optima) >= FREE_FIRST_BASINS or len(looks.picked) >= FREE_FIRST_LOOKS:
             break
+        best = looks.look(best, *entry)
+    for entry in lattice:
+        best = looks.look(best, *entry)
+    return best
+
+
+class _Looks:
+    """The basins :func:`free_first` looked at and the distinct limit-free optima found."""
+
+    def __init__(self, p: Problem) -> None:
+        self.p, self.n = p, p.config.n_points
+        self.cutoff = optimiser_cutoff(self.n, p)
+        self.picked: list[NDArray] = []
+        self.optima: list[NDArray] = []
+
+    def look(self, best: Candidate, j: float, name: str, seq: list[int], coarse: NDArray
+             ) -> Candidate:
+        """Return best, or the lower limited path from this seed's limit-free optimum."""
+        p, n = self.p, self.n
         key = resample(coarse, COARSE_SEGMENTS)
-        if not np.isfinite(j) or any(same_basin(p, key, k, resampled=True) for k in picked):
-            continue
-        picked.append(key)
+        if not np.isfinite(j) or any(same_basin(p, key, k, resampled=True)
+                                     for k in self.picked):
+            return best
+        self.picked.append(key)
         free = minimise_cost(resample(coarse, n), p.threats, p.config.w, p.box,
-                             cutoff=cutoff).points
-        if any(same_basin(p, free, k) for k in optima):
-            continue
-        optima.append(free)
+                             cutoff=self.cutoff).points
+        if any(same_basin(p, free, k) for k in self.optima):
+            return best
+        self.optima.append(free)
         if not p.cost(free).J < best.cost.J:
-            continue
+            return best
         cand = refine(p, free, seq, f'{name}, from its limit-free optimum', warm=True,
                       penalty=PENALTY_START)
         if usable(cand) and cand.cost.J < (1.0 + FREE_FIRST_CONVERGE) * best.cost.J:
             cand = converge(p, cand)
             if cand.cost.J < best.cost.J:
                 cand.limits_bound = True
-                best = cand
-    return best
+                return cand
+        return best
