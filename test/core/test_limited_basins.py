@@ -100,6 +100,7 @@ def test_a_wide_breach_is_held_from_the_cold_penalty(monkeypatch):
     path = DATA / 'fresh_s1796664513_uniform_n300_f0_w0p8_on.yaml'
     sc, w, yard, _ = _read(path)
     monkeypatch.setattr(limited_basins, 'PENALTY_START', WARM_PENALTY)
+    monkeypatch.setattr(best, 'sloped_lines', lambda p: [])    # they find it lower still
     r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=w))
     assert r.cost.J == pytest.approx(_head(path), rel=1e-3)
 
@@ -126,3 +127,37 @@ def test_an_unbound_winner_still_looks_at_the_volume_routes(monkeypatch):
     monkeypatch.setattr(best, 'volume_lines', lambda p: [])
     r = plan(sc.threats, sc.start, sc.goal, sc.box, PlannerConfig(w=w))
     assert 1.03 * yard < r.cost.J < before
+
+
+def test_a_wall_descent_within_the_slopes_is_found_from_the_sloped_routes(monkeypatch):
+    # The limit-free optimum hugs the floor and climbs the goal's vertical edge; held to
+    # the limits it ends at 407.77 (the yardstick's 406.29). A route down the walls at
+    # the slope limit, from the slope-limited surface lattice, ends 8 % below both.
+    path = DATA / 'fresh_s1796664513_uniform_n300_f0_w0p8_on.yaml'
+    sc, w, yard, _ = _read(path)
+    cfg = PlannerConfig(w=w)
+    r = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
+    assert r.seed.startswith('sloped route')
+    assert not check_limits(r.path, FlightLimits.of(cfg), float(sc.box.lo[2])).violations
+    assert r.cost.J < 0.95 * yard
+    monkeypatch.setattr(best, 'sloped_lines', lambda p: [])
+    r = plan(sc.threats, sc.start, sc.goal, sc.box, cfg)
+    assert r.cost.J > yard
+
+
+def test_every_sloped_route_edge_keeps_the_slope_and_the_surface():
+    from threat_planner.core.network import seeds
+    from threat_planner.core.world.threats import Box, ThreatField
+    box = Box.from_corners([0.0, 0.0, 0.0], [200.0, 120.0, 80.0])
+    rng = np.random.default_rng(5)
+    threats = ThreatField.from_arrays(rng.uniform(10.0, 70.0, (30, 3)) * [2.5, 1.5, 1.0],
+                                      rng.uniform(1e5, 4e5, 30))
+    s, t = np.array([0.0, 0.0, 70.0]), np.array([200.0, 120.0, 10.0])
+    routes = seeds.sloped_routes(threats, s, t, box, 0.5, 30.0, count=3)
+    assert len(routes) == 3
+    for line in routes:
+        inner = np.diff(line[1:-1], axis=0)    # the lattice's own edges
+        rise, run = np.abs(inner[:, 2]), np.hypot(inner[:, 0], inner[:, 1])
+        assert np.all(rise <= np.tan(np.radians(30.0)) * run + 1e-9)
+        on_face = np.isclose(line[1:-1], box.lo) | np.isclose(line[1:-1], box.hi)
+        assert on_face.any(axis=1).all()

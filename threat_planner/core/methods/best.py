@@ -21,8 +21,9 @@ from threat_planner.core.methods.basins import (basin_lead, COARSE_SEGMENTS, COA
                                                 known_lead, SURFACE_DENSE_PAIRS,
                                                 refined_margin, runner_up_gate, same_basin,
                                                 slope_screening)
-from threat_planner.core.methods.limited_basins import (free_first, LIMITED_BASINS_MAX_THREATS,
-                                                        volume_basins, volume_lines)
+from threat_planner.core.methods.limited_basins import (free_first, lattice_basins,
+                                                        LIMITED_BASINS_MAX_THREATS, sloped_lines,
+                                                        volume_lines)
 from threat_planner.core.methods.problem import Candidate, Problem, smooth_route
 from threat_planner.core.methods.refining import (converge, counts_far_threats, lower,
                                                   optimiser_cutoff, refine, usable,
@@ -203,9 +204,12 @@ def _optimise_routes(p: Problem, routes: list[list[int]]) -> Candidate:
         # so one basin was refined and the volume lattice was never screened): the
         # volume routes' limit-free optima join the screened ones (uniform n300 f0 w 0.2
         # of seed 1796677082: 456.57, its volume route's basin 434.01 under the limits).
-        lattice = (volume_lines(p) if cfg.surface_seeds and bounds is not None else [])
-        if bound:
-            best = volume_basins(p, best, refined, routes[0], cutoff, _refine_seed, lattice)
+        # Either way the slope-limited surface routes are refined as runners-up.
+        lattice = sloped = []
+        if cfg.surface_seeds and bounds is not None:
+            lattice, sloped = volume_lines(p), sloped_lines(p)
+        best = lattice_basins(p, best, refined, routes[0], cutoff, _refine_seed,
+                              (lattice if bound else []) + sloped)
         best = free_first(p, best, screened, [] if bound else lattice)
         bound = bound or best.limits_bound
     if not bound and not p.limits.any_constraint:

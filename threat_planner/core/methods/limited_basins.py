@@ -20,12 +20,13 @@ from threat_planner.core.methods.basins import (COARSE_SEGMENTS, COARSE_TOLERANC
 from threat_planner.core.methods.problem import Candidate, Problem
 from threat_planner.core.methods.refining import (converge, counts_far_threats,
                                                   optimiser_cutoff, refine, usable)
-from threat_planner.core.network.seeds import volume_routes
+from threat_planner.core.network.seeds import sloped_routes, volume_routes
 from threat_planner.core.optimise.optimisation import minimise_cost, PENALTY_START
 from threat_planner.core.optimise.smoothing import resample
 
 __all__ = ['FREE_FIRST_BASINS', 'FREE_FIRST_CONVERGE', 'FREE_FIRST_LOOKS',
-           'LIMITED_BASINS_MAX_THREATS', 'free_first', 'volume_basins', 'volume_lines']
+           'LIMITED_BASINS_MAX_THREATS', 'free_first', 'lattice_basins', 'sloped_lines',
+           'SLOPED_ROUTES', 'volume_lines']
 
 #: Largest field where, once the limits bound, the volume routes and the limit-free
 #: optima are tried too (:func:`volume_basins`, :func:`free_first`). Measured on the
@@ -41,6 +42,9 @@ FREE_FIRST_BASINS = 2
 #: came from the third distinct one (266.71 under the limits, the others 323.7-348.0).
 #: 4 and 6 found the same plans on that seed's 90 limited cases.
 FREE_FIRST_LOOKS = 4
+#: Slope-limited surface routes refined (:func:`sloped_lines`); on the fields of
+#: :func:`lattice_basins` the third of three found the 1,000-threat one.
+SLOPED_ROUTES = 3
 #: Such a candidate is converged when within this fraction of best's J (a converge
 #: lowered one from 341.6 to 327.6, below the 338.7 that had won).
 FREE_FIRST_CONVERGE = 0.05
@@ -54,17 +58,38 @@ def volume_lines(p: Problem) -> list[tuple[float, str, list, NDArray]]:
                    for i, line in enumerate(lines)), key=lambda e: e[0])
 
 
-def volume_basins(p: Problem, best: Candidate, refined: list[Candidate], route: list[int],
-                  cutoff: float | None, refine_seed: Callable, screened: list) -> Candidate:
-    """Return best, or a lower one refined from the volume lattice's routes (limits bound).
+def sloped_lines(p: Problem) -> list[tuple[float, str, list, NDArray]]:
+    """Return the slope-limited surface routes as screened entries (none without slopes).
+
+    SLOPED_ROUTES of :func:`..network.seeds.sloped_routes` at the stricter of the climb
+    and dive limits.
+    """
+    lim = p.limits
+    if not (lim.climb_on or lim.dive_on):
+        return []
+    dense = SURFACE_DENSE_PAIRS if counts_far_threats(p) else None
+    lines = sloped_routes(p.threats, p.s, p.t, p.box, p.config.w,
+                          min(lim.max_climb_deg, lim.max_dive_deg), count=SLOPED_ROUTES,
+                          dense_pairs=dense)
+    return sorted(((p.cost(line).J, f'sloped route {i}', [], line)
+                   for i, line in enumerate(lines)), key=lambda e: e[0])
+
+
+def lattice_basins(p: Problem, best: Candidate, refined: list[Candidate], route: list[int],
+                   cutoff: float | None, refine_seed: Callable, screened: list) -> Candidate:
+    """Return best, or a lower one refined from lattice routes (limits on).
 
     Screened with the others, the volume routes displaced basins that had won (a fresh
-    3,000-threat plan 0.6 % higher); here they (``screened``: :func:`volume_lines`) are
-    slope-held screened on their own and refined as gated runners-up (``refine_seed``:
-    best's) after best is known, so they only add. On the gate's seed 1796647071 they
-    found coplanar n100 f0 w 0.8 6.4 % lower and strongweak n300 f1 w 0.5 3.8 % lower
-    (the limited yardstick's 377.39: 377.54).
+    3,000-threat plan 0.6 % higher); here they and the sloped routes (``screened``:
+    :func:`volume_lines`, :func:`sloped_lines`) are slope-held screened on their own and
+    refined as gated runners-up (``refine_seed``: best's) after best is known, so they
+    only add. On the gate's seed 1796647071 the volume routes found coplanar n100 f0 w 0.8
+    6.4 % lower and strongweak n300 f1 w 0.5 3.8 % lower (the limited yardstick's 377.39:
+    377.54); the sloped ones found uniform n300 f0 w 0.8 of seed 1796664513 8.3 % lower
+    (407.77 -> 373.89, the yardstick 406.29).
     """
+    if not screened:
+        return best
     if p.limits.climb_on or p.limits.dive_on:
         entries, _, _ = slope_screening(p, screened, p.box, cutoff, set(), COARSE_TOLERANCE)
     else:
