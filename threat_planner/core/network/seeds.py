@@ -13,6 +13,9 @@ Without flight limits a lattice through the whole box (26-connected, VOLUME_DIVI
 edge) gives routes too: along a wall for a while, then across a sparse corner of the cloud,
 a basin neither the network nor the surface reaches (a fresh 1,000-threat field at w 0.2:
 643.5 against the surface route's 676.3, the in-box yardstick's 643.3).
+
+With climb and dive limits a third lattice keeps to them: the surface one with knight's
+steps on each face and no edge steeper than the limits (:func:`sloped_routes`).
 """
 
 from __future__ import annotations
