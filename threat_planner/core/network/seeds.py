@@ -128,10 +128,9 @@ def sloped_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: flo
                   max_slope_deg: float, divisions: int = SURFACE_DIVISIONS,
                   count: int = SURFACE_ROUTES, dense_pairs: int | None = None
                   ) -> list[NDArray]:
-    """Least-J routes over the box's surface whose lattice edges climb and dive at most
-    ``max_slope_deg``.
+    """Least-J routes over the box's surface, no lattice edge steeper than the limit.
 
-    On a face the lattice also steps two cells along one axis and one along another
+    ``max_slope_deg`` [deg] bounds every edge's climb and dive. On a face the lattice also steps two cells along one axis and one along another
     (slopes of 26.6 deg on a cubic box's walls), and every edge steeper than the limit is
     dropped: a route down a wall then descends as a limited path may, where the surface
     routes (:func:`surface_routes`) drop down the box's vertical edges and hold to the
