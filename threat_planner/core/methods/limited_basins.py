@@ -1,11 +1,13 @@
-"""Limited basins method ``best`` adds once the limits bound: never above its winner.
+"""Limited basins method ``best`` adds once the limits are on: never above its winner.
 
 The cold refinement holds the flight limits from its coarse levels on and ranks the basins
 by a slope-held screening at 8 segments; both can miss the limited optimum (issue 42's
 limited yardstick found paths 4-7 % below on fresh fields). Two additions run after the
-winner is converged, each kept only where it ends lower: the volume lattice's routes
-refined as runners-up (:func:`volume_basins`), and the best box-only basins refined from
-their limit-free optimum at full resolution (:func:`free_first`).
+winner is converged, each kept only where it ends lower: lattice routes refined as
+runners-up (:func:`lattice_basins`: the volume lattice's where a limit bound the winner,
+the slope-limited surface lattice's always), and the best box-only basins refined from
+their limit-free optimum at full resolution (:func:`free_first`; with the volume routes'
+where no limit bound the winner, which then was the only basin refined).
 """
 
 from __future__ import annotations
@@ -28,8 +30,8 @@ __all__ = ['FREE_FIRST_BASINS', 'FREE_FIRST_CONVERGE', 'FREE_FIRST_LOOKS',
            'LIMITED_BASINS_MAX_THREATS', 'free_first', 'lattice_basins', 'sloped_lines',
            'SLOPED_ROUTES', 'volume_lines']
 
-#: Largest field where, once the limits bound, the volume routes and the limit-free
-#: optima are tried too (:func:`volume_basins`, :func:`free_first`). Measured on the
+#: Largest field where, once the limits are on, the lattice routes and the limit-free
+#: optima are tried too (:func:`lattice_basins`, :func:`free_first`). Measured on the
 #: gate's fresh seed 1796647071: at 1,000-3,000 threats they lowered 10 of 60 plans by up
 #: to 7.7 % for 1.7x the time; at 10,000 they cost 1.0 s a plan and lowered none.
 LIMITED_BASINS_MAX_THREATS = 3000

@@ -78,7 +78,7 @@ def _unit_lattice(divisions: int, surface: bool = True, reach: int = 1
 
     ``surface``: only the cells on the box's surface and the edges that lie on a face;
     else every cell and its 13 forward neighbours (26-connected). ``reach`` 2 adds the
-    steps of two cells along one axis and one along another (on a face only).
+    steps of two cells along one axis and one along another (:func:`sloped_routes`).
     """
     n = divisions
     ticks = np.arange(n + 1)
@@ -130,12 +130,13 @@ def sloped_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: flo
                   ) -> list[NDArray]:
     """Least-J routes over the box's surface, no lattice edge steeper than the limit.
 
-    ``max_slope_deg`` [deg] bounds every edge's climb and dive. On a face the lattice also steps two cells along one axis and one along another
-    (slopes of 26.6 deg on a cubic box's walls), and every edge steeper than the limit is
-    dropped: a route down a wall then descends as a limited path may, where the surface
-    routes (:func:`surface_routes`) drop down the box's vertical edges and hold to the
-    limits far from there (uniform n1000 f0 w 0.8 of seed 1796561117: the ceiling route's
-    limit-free optimum 371.5 held to 524.6, a wall descent at 30 deg to 489.7).
+    ``max_slope_deg`` [deg] bounds every edge's climb and dive. On a face the lattice
+    also steps two cells along one axis and one along another (slopes of 26.6 deg on a
+    cubic box's walls), and every edge steeper than the limit is dropped: a route down a
+    wall then descends as a limited path may, where the surface routes
+    (:func:`surface_routes`) drop down the box's vertical edges and hold to the limits far
+    from there (uniform n1000 f0 w 0.8 of seed 1796561117: the ceiling route's limit-free
+    optimum 371.5 held to 524.6, a wall descent at 30 deg to 489.6).
     Args and returns as :func:`surface_routes`, with the slope limit [deg].
     """
     cells, edges = _unit_lattice(divisions, surface=True, reach=2)
@@ -143,7 +144,8 @@ def sloped_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: flo
     d = points[edges[:, 1]] - points[edges[:, 0]]
     rise = np.abs(d[:, 2])
     run = np.hypot(d[:, 0], d[:, 1])
-    ok = rise <= np.tan(np.radians(min(max(max_slope_deg, 0.0), 90.0))) * run + 1e-9 * (rise + run)
+    slope = np.tan(np.radians(min(max(max_slope_deg, 0.0), 90.0)))
+    ok = rise <= slope * run + 1e-9 * (rise + run)
     return _routes(points, edges[ok], threats, s, t, box, w, count, dense_pairs)
 
 
