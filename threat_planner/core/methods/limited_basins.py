@@ -54,10 +54,8 @@ FREE_FIRST_CONVERGE = 0.05
 
 def volume_lines(p: Problem) -> list[tuple[float, str, list, NDArray]]:
     """Return the volume lattice's routes as screened entries ``(J, name, [], line)``."""
-    dense = SURFACE_DENSE_PAIRS if counts_far_threats(p) else None
-    lines = volume_routes(p.threats, p.s, p.t, p.box, p.config.w, dense_pairs=dense)
-    return sorted(((p.cost(line).J, f'volume route {i}', [], line)
-                   for i, line in enumerate(lines)), key=lambda e: e[0])
+    return _entries(p, 'volume route', volume_routes(p.threats, p.s, p.t, p.box, p.config.w,
+                                                     dense_pairs=_dense(p)))
 
 
 def sloped_lines(p: Problem) -> list[tuple[float, str, list, NDArray]]:
@@ -69,12 +67,20 @@ def sloped_lines(p: Problem) -> list[tuple[float, str, list, NDArray]]:
     lim = p.limits
     if not (lim.climb_on or lim.dive_on):
         return []
-    dense = SURFACE_DENSE_PAIRS if counts_far_threats(p) else None
-    lines = sloped_routes(p.threats, p.s, p.t, p.box, p.config.w,
-                          min(lim.max_climb_deg, lim.max_dive_deg), count=SLOPED_ROUTES,
-                          dense_pairs=dense)
-    return sorted(((p.cost(line).J, f'sloped route {i}', [], line)
-                   for i, line in enumerate(lines)), key=lambda e: e[0])
+    return _entries(p, 'sloped route', sloped_routes(
+        p.threats, p.s, p.t, p.box, p.config.w, min(lim.max_climb_deg, lim.max_dive_deg),
+        count=SLOPED_ROUTES, dense_pairs=_dense(p)))
+
+
+def _dense(p: Problem) -> int | None:
+    """Return the pairs the lattices cost exactly (more where the far threats count)."""
+    return SURFACE_DENSE_PAIRS if counts_far_threats(p) else None
+
+
+def _entries(p: Problem, kind: str, lines: list[NDArray]) -> list[tuple]:
+    """Return lattice routes as screened entries ``(J, 'kind i', [], line)``, least J first."""
+    return sorted(((p.cost(line).J, f'{kind} {i}', [], line) for i, line in enumerate(lines)),
+                  key=lambda e: e[0])
 
 
 def lattice_basins(p: Problem, best: Candidate, refined: list[Candidate], route: list[int],

@@ -30,8 +30,7 @@ from threat_planner.core.network.search import segment_costs
 from threat_planner.core.world.threats import Box, ThreatField
 
 __all__ = ['sloped_routes', 'SURFACE_DIVISIONS', 'SURFACE_ROUTES', 'surface_lattice',
-           'surface_routes',
-           'VOLUME_DIVISIONS', 'VOLUME_ROUTES', 'volume_routes']
+           'surface_routes', 'VOLUME_DIVISIONS', 'VOLUME_ROUTES', 'volume_routes']
 
 #: Intervals per box edge of the surface lattice.
 SURFACE_DIVISIONS = 8
@@ -56,18 +55,19 @@ CUTOFF_SPACINGS = 2.0
 ROUTE_PENALTY = 3.0
 
 
-def surface_lattice(box: Box, divisions: int) -> tuple[NDArray, NDArray]:
+def surface_lattice(box: Box, divisions: int, reach: int = 1) -> tuple[NDArray, NDArray]:
     """Lattice on the box's surface and its edges that lie on a face.
 
     Args:
         box: The flight box.
         divisions: Intervals per box edge.
+        reach: 2 adds the knight's steps of :func:`_unit_lattice`.
 
     Returns:
         ``(points (P, 3) [m], edges (E, 2))``: neighbours differ by at most one step per
         axis and share a face, so every edge runs on the surface (face diagonals included).
     """
-    cells, edges = _unit_lattice(divisions)
+    cells, edges = _unit_lattice(divisions, True, reach)
     return box.lo + cells / divisions * (box.hi - box.lo), edges
 
 
@@ -139,8 +139,7 @@ def sloped_routes(threats: ThreatField, s: NDArray, t: NDArray, box: Box, w: flo
     optimum 371.5 held to 524.6, a wall descent at 30 deg to 489.6).
     Args and returns as :func:`surface_routes`, with the slope limit [deg].
     """
-    cells, edges = _unit_lattice(divisions, surface=True, reach=2)
-    points = box.lo + cells / divisions * (box.hi - box.lo)
+    points, edges = surface_lattice(box, divisions, reach=2)
     d = points[edges[:, 1]] - points[edges[:, 0]]
     rise = np.abs(d[:, 2])
     run = np.hypot(d[:, 0], d[:, 1])
