@@ -8,8 +8,8 @@ import pytest
 
 from threat_planner.core.optimise.limit_kernels import LimitTerm
 from threat_planner.core.optimise.limits import (check_limits, climb_angles, constraint_jacobian,
-                                                 constraint_values, constraint_vjp, FlightLimits,
-                                                 turn_radii)
+                                                 constraint_values, constraint_values_jacobian,
+                                                 constraint_vjp, FlightLimits, turn_radii)
 
 ALL_ON = FlightLimits(20.0, 30.0, 15.0, 0.0)
 
@@ -187,3 +187,22 @@ def test_a_vertical_segment_is_not_a_stationary_point_of_the_climb_constraint():
     # Moving the top vertex horizontally (towards the goal) raises g: sin(20 deg) / 10 m.
     slope = jac[0, 1, :2] @ np.array([1.0, 1.0]) / math.sqrt(2.0)
     assert slope == pytest.approx(math.sin(math.radians(20.0)) / 10.0)
+
+
+@given(st.integers(0, 10_000), st.integers(1, 30),
+       st.sampled_from([ALL_ON, FlightLimits(10.0, 90.0, 0.0, 0.0),
+                        FlightLimits(90.0, 5.0, 25.0, 0.0)]),
+       st.sampled_from(['none', 'repeat', 'vertical']))
+@settings(max_examples=60, deadline=None)
+def test_compiled_jacobian_is_the_numpy_one(seed, n, limits, degenerate):
+    """LimitTerm.values_jacobian: the rows and dense Jacobian of constraint_values_jacobian,
+    also through a repeated vertex (a zero-length segment) and a vertical segment."""
+    pts = _random_path(seed, n)
+    if degenerate == 'repeat' and n >= 2:
+        pts[1] = pts[0]
+    if degenerate == 'vertical' and n >= 2:
+        pts[1, :2] = pts[0, :2]
+    g, jac = constraint_values_jacobian(pts, limits)
+    cg, cjac = LimitTerm(limits, len(pts)).values_jacobian(pts)
+    np.testing.assert_allclose(cg, g, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(cjac, jac, rtol=1e-9, atol=1e-12)

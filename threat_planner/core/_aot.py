@@ -46,7 +46,8 @@ ENTRY = {
     'threat_planner.core.cost.far_kernels': ('_far_pairs',),
     'threat_planner.core.network.graph_kernels': ('_dijkstra', 'incentre_kernel'),
     'threat_planner.core.optimise.lbfgs': ('_objective', 'objective_scale', '_minimise'),
-    'threat_planner.core.optimise.limit_kernels': ('_measure', '_values', '_penalty'),
+    'threat_planner.core.optimise.limit_kernels': ('_measure', '_values', '_penalty',
+                                                   '_jacobian'),
     'threat_planner.core.optimise.lagrangian_kernels': ('_rounds',),
     'threat_planner.core.optimise.chain_kernels': ('_integrate', '_resample'),
 }

@@ -48,6 +48,8 @@ SIGNATURES = {
         (I8, (A2, F8, F8, F8, B1, B1, B1, A1)),
     'threat_planner.core.optimise.limit_kernels._penalty':
         ('Tuple(float64, int64)', (A2, F8, F8, F8, B1, B1, B1, A1, F8, A1, A2)),
+    'threat_planner.core.optimise.limit_kernels._jacobian':
+        (I8, (A2, F8, F8, F8, B1, B1, B1, A1, A3)),
     'threat_planner.core.optimise.lagrangian_kernels._rounds':
         (I8, (A1, A1, A1, R2, R1, F8, I1, I1, R1, R1, F8, F8, F8, A1, A1, I8, F8, F8, I8, F8,
          B1, I8, F8, F8, F8, A1, F8, A1, F8, A1, A1, A2)),

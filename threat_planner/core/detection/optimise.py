@@ -23,8 +23,7 @@ from threat_planner.core.detection.hazard import layout, path_hazard
 from threat_planner.core.detection.kernels import compiled_hazard
 from threat_planner.core.detection.model import DetectionModel
 from threat_planner.core.optimise.limit_kernels import LimitTerm
-from threat_planner.core.optimise.limits import (constraint_values_jacobian, FlightLimits,
-                                                 meets_limits)
+from threat_planner.core.optimise.limits import FlightLimits, meets_limits
 from threat_planner.core.optimise.optimisation import aim, PENALTY_GROWTH, PENALTY_START
 
 __all__ = ['DetectionProblem', 'Outcome', 'minimise_detection', 'refine_slsqp']
@@ -224,12 +223,12 @@ def refine_slsqp(x0: NDArray, prob: DetectionProblem, max_iter: int = SLSQP_ITER
     """Minimise the detection objective from x0 by SLSQP, limits and bound as constraints.
 
     The limits are :func:`~threat_planner.core.optimise.limits.constraint_values` of the
-    aimed limits with their exact Jacobian; the layout is made again from each run's end,
-    up to `layouts` runs, while the run moved the path.
+    aimed limits with their exact Jacobian (compiled, :class:`LimitTerm`); the layout is
+    made again from each run's end, up to `layouts` runs, while the run moved the path.
     """
     x = np.asarray(x0, float).copy()
     n1 = len(x)
-    aimed = aim(prob.limits)
+    term = LimitTerm(aim(prob.limits), n1)
     bounded = prob.h_max is not None
     w_h = 0.0 if bounded else prob.w
     w_l = 1.0 if bounded else 1.0 - prob.w
@@ -274,7 +273,7 @@ def refine_slsqp(x0: NDArray, prob: DetectionProblem, max_iter: int = SLSQP_ITER
             # SLSQP asks for the values and the Jacobian at each point: one pass for both.
             key = z.tobytes()
             if key not in limit_cache:
-                g, jac = constraint_values_jacobian(full(z), aimed)
+                g, jac = term.values_jacobian(full(z))
                 limit_cache.clear()
                 limit_cache[key] = (g, jac[:, 1:-1, :].reshape(-1, 3 * (n1 - 2)))
             return limit_cache[key]

@@ -348,4 +348,5 @@ def warm_up() -> None:
     pts = np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 0.9], [2.0, 1.0, 0.0], [3.0, 0.0, 0.5]])
     term.values(pts)
     term.penalty(pts, np.ones(term.rows), 10.0)
+    term.values_jacobian(pts)
     measure(pts, 0.0)
