@@ -195,6 +195,36 @@ def _values(points, sin_c, sin_d, r_min, on_c, on_d, on_r, out):
 
 
 @njit(cache=True)
+def _axis(points):
+    """Horizontal direction of a vertical segment: the start-goal one (as limits._blocks)."""
+    n = points.shape[0] - 1
+    ux = points[n, 0] - points[0, 0]
+    uy = points[n, 1] - points[0, 1]
+    un = math.sqrt(ux * ux + uy * uy)
+    return (ux / un, uy / un) if un > 0 else (1.0, 0.0)
+
+
+@njit(cache=True)
+def _slope_gradient(points, s_, sn, cs, sign, ux, uy):
+    """dg/dd of segment s_'s climb (sign -1) or dive (+1) row, and whether |d| > 0.
+
+    dg/dd = sin dh/dd / |d| - g d / |d|^2 + sign cos e_z / |d|, with |d| taken as 1 for a
+    zero-length segment.
+    """
+    dx = points[s_ + 1, 0] - points[s_, 0]
+    dy = points[s_ + 1, 1] - points[s_, 1]
+    dz = points[s_ + 1, 2] - points[s_, 2]
+    ln = math.sqrt(dx * dx + dy * dy + dz * dz)
+    positive = ln > 0
+    ln = ln if positive else 1.0
+    h = math.sqrt(dx * dx + dy * dy)
+    hx, hy = (dx / h, dy / h) if h > 0 else (ux, uy)
+    gv = (h * sn + sign * dz * cs) / ln
+    return (sn * hx / ln - gv * dx / (ln * ln), sn * hy / ln - gv * dy / (ln * ln),
+            sign * cs / ln - gv * dz / (ln * ln), positive)
+
+
+@njit(cache=True)
 def _penalty(points, sin_c, sin_d, r_min, on_c, on_d, on_r, lam, mu, g, grad):
     """PHR term sum(s^2 - lam^2) / (2 mu), s = max(0, lam - mu g); gradient into grad."""
     m = _values(points, sin_c, sin_d, r_min, on_c, on_d, on_r, g)
@@ -207,11 +237,7 @@ def _penalty(points, sin_c, sin_d, r_min, on_c, on_d, on_r, lam, mu, g, grad):
         val += s * s - lam[k] * lam[k]
         # d/dx of the term is -s dg/dx; keep s in g's slot for the passes below.
         g[k] = s
-    # Horizontal direction of a vertical segment: the start-goal one (as limits._blocks).
-    ux = points[n, 0] - points[0, 0]
-    uy = points[n, 1] - points[0, 1]
-    un = math.sqrt(ux * ux + uy * uy)
-    ux, uy = (ux / un, uy / un) if un > 0 else (1.0, 0.0)
+    ux, uy = _axis(points)
     row = 0
     for k in range(2):
         on = on_c if k == 0 else on_d
@@ -225,20 +251,10 @@ def _penalty(points, sin_c, sin_d, r_min, on_c, on_d, on_r, lam, mu, g, grad):
             row += 1
             if s == 0.0:
                 continue
-            dx = points[s_ + 1, 0] - points[s_, 0]
-            dy = points[s_ + 1, 1] - points[s_, 1]
-            dz = points[s_ + 1, 2] - points[s_, 2]
-            ln = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if ln <= 0:
+            fx, fy, fz, positive = _slope_gradient(points, s_, sn, cs, sign, ux, uy)
+            if not positive:
                 continue
-            h = math.sqrt(dx * dx + dy * dy)
-            hx, hy = (dx / h, dy / h) if h > 0 else (ux, uy)
-            gv = (h * sn + sign * dz * cs) / ln
-            # dg/dd = sin dh/dd / |d| - g d / |d|^2 + sign cos e_z / |d|; the term's
-            # gradient is -s dg/dd at the segment's end, +s dg/dd at its start.
-            fx = sn * hx / ln - gv * dx / (ln * ln)
-            fy = sn * hy / ln - gv * dy / (ln * ln)
-            fz = sign * cs / ln - gv * dz / (ln * ln)
+            # The term's gradient is -s dg/dd at the segment's end, +s dg/dd at its start.
             grad[s_ + 1, 0] -= s * fx
             grad[s_ + 1, 1] -= s * fy
             grad[s_ + 1, 2] -= s * fz
@@ -273,10 +289,7 @@ def _jacobian(points, sin_c, sin_d, r_min, on_c, on_d, on_r, g, jac):
     m = _values(points, sin_c, sin_d, r_min, on_c, on_d, on_r, g)
     n = points.shape[0] - 1
     jac[:, :, :] = 0.0
-    ux = points[n, 0] - points[0, 0]
-    uy = points[n, 1] - points[0, 1]
-    un = math.sqrt(ux * ux + uy * uy)
-    ux, uy = (ux / un, uy / un) if un > 0 else (1.0, 0.0)
+    ux, uy = _axis(points)
     row = 0
     for k in range(2):
         on = on_c if k == 0 else on_d
@@ -288,19 +301,9 @@ def _jacobian(points, sin_c, sin_d, r_min, on_c, on_d, on_r, g, jac):
         for s_ in range(n):
             r = row
             row += 1
-            dx = points[s_ + 1, 0] - points[s_, 0]
-            dy = points[s_ + 1, 1] - points[s_, 1]
-            dz = points[s_ + 1, 2] - points[s_, 2]
-            # A zero-length segment gets limits._blocks' subgradient (length taken as 1), not
-            # a zero row, which SLSQP would read as a constraint it cannot move.
-            ln = math.sqrt(dx * dx + dy * dy + dz * dz)
-            ln = ln if ln > 0 else 1.0
-            h = math.sqrt(dx * dx + dy * dy)
-            hx, hy = (dx / h, dy / h) if h > 0 else (ux, uy)
-            gv = (h * sn + sign * dz * cs) / ln
-            fx = sn * hx / ln - gv * dx / (ln * ln)
-            fy = sn * hy / ln - gv * dy / (ln * ln)
-            fz = sign * cs / ln - gv * dz / (ln * ln)
+            # A zero-length segment keeps its subgradient (limits._blocks' too), not a zero
+            # row, which SLSQP would read as a constraint it cannot move.
+            fx, fy, fz, _ = _slope_gradient(points, s_, sn, cs, sign, ux, uy)
             jac[r, s_ + 1, 0] = fx
             jac[r, s_ + 1, 1] = fy
             jac[r, s_ + 1, 2] = fz
